@@ -1,0 +1,2 @@
+//! Analyses of simulated responses.
+pub mod motion;

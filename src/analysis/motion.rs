@@ -1,0 +1,1 @@
+//! Motion-state classification. (Being written.)

@@ -1,0 +1,1 @@
+//! Gear-train model. (Being written.)

@@ -1,0 +1,1 @@
+//! PNG/SVG figures. (Being written.)

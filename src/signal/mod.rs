@@ -1,0 +1,1 @@
+//! Windows and amplitude spectra. (Being written.)
