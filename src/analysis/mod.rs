@@ -1,2 +1,3 @@
 //! Analyses of simulated responses.
 pub mod motion;
+pub mod simulate;

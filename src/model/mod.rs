@@ -1,1 +1,20 @@
-//! Gear-train model. (Being written.)
+//! Lumped-parameter gear-train models.
+//!
+//! - [`element`]: coordinates, coupling elements (mesh, shaft, bearing) and loads.
+//! - [`assembly`]: one generic assembly into the relative form `ẍ + A F(x, ẋ, t) = F̄ − ë` and
+//!   its dimensionless version.
+//! - [`system`]: the resolved [`DimensionlessModel`] and its right-hand side [`GearOde`].
+//! - [`kinematics`]: mesh and shaft frequencies from tooth counts.
+//! - [`rig_a`]: the first seed's rig (Model A) as a configuration.
+
+pub mod assembly;
+pub mod element;
+pub mod kinematics;
+pub mod rig_a;
+pub mod system;
+
+pub use assembly::Assembly;
+pub use element::{Damping, Dof, DofKind, Element, Harmonic, Load, LoadSchedule, StiffnessShape};
+pub use kinematics::{Frequencies, ToothCounts};
+pub use rig_a::{ModelAConfig, Wear};
+pub use system::{DimensionlessModel, GearOde, dead_zone};
