@@ -1,29 +1,21 @@
+use gearwear::analysis::simulate::{observe, RunSpec};
 use gearwear::model::{ModelAConfig, Wear};
-use gearwear::solver::{sample_uniform, Dopri5, Dopri5Options, Integrator};
+use rayon::prelude::*;
 fn main() {
-    let cfg = ModelAConfig::default_rig();
     let args: Vec<f64> = std::env::args().skip(1).map(|s| s.parse().unwrap()).collect();
-    let (om, ea) = (args[0], args[1]);
-    let m = cfg.assembly(Wear::fixed_axis(ea)).unwrap().resolve().unwrap();
-    println!("omega_h = {} rad/s ({} Hz)", m.omega_h, m.omega_h / 6.283);
-    println!("F = {:?}", m.f);
-    println!("c = {:?}", m.c);
-    println!("nat = {:?}", m.natural_frequencies());
-    println!("A row0 = {:?}", m.a.row(0));
-    let sys = m.system(om).unwrap();
-    let y0 = vec![0.0; 20];
+    let ea = args[0];
+    let m = ModelAConfig::default_rig().assembly(Wear::fixed_axis(ea)).unwrap().resolve().unwrap();
+    let omegas: Vec<f64> = (1..=500).map(|i| i as f64 * 0.01).collect();
     let t0 = std::time::Instant::now();
-    let mut it = Dopri5::new(&sys, 0.0, &y0, Dopri5Options::default()).unwrap();
-    let per = std::f64::consts::TAU / om;
-    let trans = 300.0f64.max(100.0 * per);
-    let mut pts = vec![];
-    let mut mx = f64::MIN; let mut mn = f64::MAX;
-    sample_uniform(&mut it, trans, per / 256.0, trans + 80.0 * per, |k, _t, y| {
-        if k % 256 == 0 { pts.push((y[0], y[10])); }
-        mx = mx.max(y[0]); mn = mn.min(y[0]);
-    }).unwrap();
-    println!("elapsed {:?} stats {:?}", t0.elapsed(), it.stats());
-    println!("x1 range [{mn}, {mx}]");
-    for p in pts.iter().take(12) { print!("({:.4},{:.4}) ", p.0, p.1); }
-    println!();
+    let res: Vec<(f64, usize, f64)> = omegas.par_iter().map(|&w| {
+        let t = std::time::Instant::now();
+        let sys = m.system(w).unwrap();
+        let spec = RunSpec::paper(w);
+        let st = observe(&sys, Some(&m), &spec, |_, _, _| {}).unwrap();
+        (w, st.steps + st.rejected, t.elapsed().as_secs_f64())
+    }).collect();
+    println!("total {:?}", t0.elapsed());
+    for r in res.iter().step_by(25) { println!("{:.2} steps {} time {:.4}", r.0, r.1, r.2); }
+    let s: f64 = res.iter().map(|r| r.2).sum();
+    println!("cpu sum {s:.2}");
 }

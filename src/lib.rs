@@ -17,6 +17,7 @@
 //! The numeric modules import nothing from a web framework or a database.
 
 pub mod analysis;
+pub mod cli;
 pub mod error;
 pub mod model;
 pub mod plot;

@@ -1,1 +1,5 @@
-fn main() {}
+use clap::Parser;
+
+fn main() -> anyhow::Result<()> {
+    gearwear::cli::run(gearwear::cli::Cli::parse())
+}

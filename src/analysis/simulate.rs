@@ -136,9 +136,36 @@ pub fn run_system<S: OdeSystem>(sys: &S, spec: &RunSpec) -> Result<Trajectory> {
 }
 
 fn run_inner<S: OdeSystem>(sys: &S, model: Option<&DimensionlessModel>, spec: &RunSpec) -> Result<Trajectory> {
+    let dim = sys.dim();
+    let n_samples = spec.periods * spec.samples_per_period;
+    let mut tau = Vec::with_capacity(n_samples);
+    let mut states = Vec::with_capacity(n_samples * dim);
+    let stats = observe(sys, model, spec, |_, t, y| {
+        tau.push(t);
+        states.extend_from_slice(y);
+    })?;
+    Ok(Trajectory {
+        omega1: spec.omega1,
+        samples_per_period: spec.samples_per_period,
+        dim,
+        tau,
+        states,
+        stats,
+    })
+}
+
+/// Integrate a run and hand every retained sample `(k, τ_k, y(τ_k))` to `on_sample` without
+/// storing the trajectory (what a sweep needs). `model`, when given, makes the initial state
+/// kinematically consistent ([`DimensionlessModel::project_consistent`]).
+pub fn observe<S: OdeSystem>(
+    sys: &S,
+    model: Option<&DimensionlessModel>,
+    spec: &RunSpec,
+    mut on_sample: impl FnMut(usize, f64, &[f64]),
+) -> Result<Stats> {
     spec.check()?;
     let dim = sys.dim();
-    let y0 = if spec.initial.is_empty() {
+    let mut y0 = if spec.initial.is_empty() {
         vec![0.0; dim]
     } else if spec.initial.len() == dim {
         spec.initial.clone()
@@ -148,7 +175,6 @@ fn run_inner<S: OdeSystem>(sys: &S, model: Option<&DimensionlessModel>, spec: &R
             spec.initial.len()
         )));
     };
-    let mut y0 = y0;
     if let Some(m) = model {
         m.project_consistent(spec.omega1, 0.0, &mut y0);
     }
@@ -159,21 +185,13 @@ fn run_inner<S: OdeSystem>(sys: &S, model: Option<&DimensionlessModel>, spec: &R
     let t_end = t0 + (n_samples - 1) as f64 * dt;
     let mut integ = Dopri5::new(sys, 0.0, &y0, spec.solver)?;
     advance_to(&mut integ, t0)?;
-    let mut tau = Vec::with_capacity(n_samples);
-    let mut states = Vec::with_capacity(n_samples * dim);
-    sample_uniform(&mut integ, t0, dt, t_end, |_, t, y| {
-        tau.push(t);
-        states.extend_from_slice(y);
+    let mut finite = true;
+    sample_uniform(&mut integ, t0, dt, t_end, |k, t, y| {
+        finite &= y.iter().all(|v| v.is_finite());
+        on_sample(k, t, y);
     })?;
-    if states.iter().any(|v| !v.is_finite()) {
+    if !finite {
         return Err(Error::NonFinite { t: integ.t() });
     }
-    Ok(Trajectory {
-        omega1: spec.omega1,
-        samples_per_period: spec.samples_per_period,
-        dim,
-        tau,
-        states,
-        stats: integ.stats(),
-    })
+    Ok(integ.stats())
 }

@@ -1,0 +1,231 @@
+//! A single-run report: spectral lines, motion state, Poincaré section, plots.
+
+use std::path::Path;
+
+use serde::Serialize;
+
+use super::motion::{Classification, ClassifyOptions, classify};
+use super::simulate::{RunSpec, Trajectory, run};
+use crate::error::Result;
+use crate::model::{DimensionlessModel, Frequencies};
+use crate::plot::{self, Panel, Series};
+use crate::signal::{self, Window};
+use crate::solver::Stats;
+
+/// One-sided peak amplitudes of the named lines (a sine of amplitude A reads A), in units of
+/// the analysed quantity (x̄ = deflection / b_ref for the deflections).
+#[derive(Debug, Clone, Serialize)]
+pub struct Lines {
+    pub f1: f64,
+    pub f2: f64,
+    #[serde(rename = "2f2")]
+    pub two_f2: f64,
+    pub f3: f64,
+    #[serde(rename = "f1/2")]
+    pub half_f1: f64,
+    #[serde(rename = "f1-f2")]
+    pub f1_minus_f2: f64,
+}
+
+impl Lines {
+    /// Measure the lines of `x`, sampled `spp` times per stage-1 mesh period (so frequencies
+    /// are in units of f1), at the kinematic ratios `fr`.
+    pub fn measure(x: &[f64], spp: f64, fr: &Frequencies) -> Result<Self> {
+        let a = |f: f64| signal::line_amplitude(x, spp, f);
+        Ok(Lines {
+            f1: a(fr.f1)?,
+            f2: a(fr.f2)?,
+            two_f2: a(fr.two_f2)?,
+            f3: a(fr.f3)?,
+            half_f1: a(fr.half_f1)?,
+            f1_minus_f2: a(fr.f1_minus_f2)?,
+        })
+    }
+
+    /// (label, normalised frequency) markers for plots.
+    pub fn markers(fr: &Frequencies) -> Vec<(&'static str, f64)> {
+        vec![
+            ("f1", fr.f1),
+            ("f2", fr.f2),
+            ("2f2", fr.two_f2),
+            ("f3", fr.f3),
+            ("f1/2", fr.half_f1),
+            ("f1-f2", fr.f1_minus_f2),
+        ]
+    }
+}
+
+/// Summary statistics of a series.
+#[derive(Debug, Clone, Serialize)]
+pub struct SeriesSummary {
+    pub min: f64,
+    pub max: f64,
+    pub mean: f64,
+    pub rms_ac: f64,
+}
+
+impl SeriesSummary {
+    fn of(x: &[f64]) -> Self {
+        let n = x.len().max(1) as f64;
+        let mean = x.iter().sum::<f64>() / n;
+        SeriesSummary {
+            min: x.iter().cloned().fold(f64::INFINITY, f64::min),
+            max: x.iter().cloned().fold(f64::NEG_INFINITY, f64::max),
+            mean,
+            rms_ac: (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt(),
+        }
+    }
+}
+
+/// What `gearwear simulate` prints.
+#[derive(Debug, Clone, Serialize)]
+pub struct SimulationReport {
+    pub model: String,
+    pub omega1: f64,
+    pub ea: f64,
+    pub planetary_error: f64,
+    /// Stage-1 mesh frequency in Hz at this Ω1 (`Ω1 ω_h / 2π`).
+    pub f1_hz: f64,
+    pub omega_h_rad_s: f64,
+    pub periods: usize,
+    pub samples_per_period: usize,
+    pub transient_tau: f64,
+    /// Element whose response the lines, motion state and Poincaré section describe.
+    pub element: String,
+    /// Lines of x̄1 over the retained periods.
+    pub lines: Lines,
+    pub motion_state: String,
+    pub classification: Classification,
+    pub x: SeriesSummary,
+    /// Poincaré points (x̄, x̄') once per stage-1 mesh period.
+    pub poincare: Vec<(f64, f64)>,
+    pub solver: Stats,
+}
+
+/// Run and report on element `element` (0: x1).
+pub fn simulate_report(
+    model: &DimensionlessModel,
+    fr: &Frequencies,
+    spec: &RunSpec,
+    ea: f64,
+    planetary_error: f64,
+    element: usize,
+) -> Result<(SimulationReport, Trajectory)> {
+    let traj = run(model, spec)?;
+    let x = traj.series(element);
+    let v = traj.series(model.n() + element);
+    let lines = Lines::measure(&x, traj.sample_rate_per_f1(), fr)?;
+    let poincare = traj.poincare(element);
+    let sx = SeriesSummary::of(&x);
+    let sv = SeriesSummary::of(&v);
+    let scale = ((sx.max - sx.min).max(1e-12), (sv.max - sv.min).max(1e-12));
+    let classification = classify(&poincare, scale, &ClassifyOptions::default())?;
+    Ok((
+        SimulationReport {
+            model: model.name.clone(),
+            omega1: spec.omega1,
+            ea,
+            planetary_error,
+            f1_hz: spec.omega1 * model.omega_h / std::f64::consts::TAU,
+            omega_h_rad_s: model.omega_h,
+            periods: spec.periods,
+            samples_per_period: spec.samples_per_period,
+            transient_tau: spec.transient.length(spec.omega1),
+            element: model.names[element].clone(),
+            lines,
+            motion_state: classification.state.label(),
+            classification,
+            x: sx,
+            poincare,
+            solver: traj.stats,
+        },
+        traj,
+    ))
+}
+
+/// Write the four figures of one run (time history, phase portrait with the Poincaré points,
+/// Poincaré section, spectrum over f/f1) and a 2×2 overview into `dir`. Returns the paths.
+pub fn plot_run(
+    dir: &Path,
+    report: &SimulationReport,
+    traj: &Trajectory,
+    element: usize,
+    fr: &Frequencies,
+) -> Result<Vec<std::path::PathBuf>> {
+    let n = traj.dim / 2;
+    let x = traj.series(element);
+    let v = traj.series(n + element);
+    let t: Vec<f64> = traj.tau.iter().map(|t| (t - traj.tau[0]) * traj.omega1 / std::f64::consts::TAU).collect();
+    let (px, pv): (Vec<f64>, Vec<f64>) = report.poincare.iter().cloned().unzip();
+    let spec = signal::amplitude_spectrum(&x, traj.sample_rate_per_f1(), Window::Hann)?;
+    let markers = Lines::markers(fr);
+    let band = spec.freq.iter().position(|&f| f > 2.5).unwrap_or(spec.freq.len());
+    let (sf, sa) = (&spec.freq[..band], &spec.amplitude[..band]);
+    let name = &report.element;
+    let tag = format!("Ω1 = {:.3}, ea = {:.2}", report.omega1, report.ea);
+    // The last 10 periods for the time history, so the waveform is visible.
+    let tail = (10 * traj.samples_per_period).min(x.len());
+    let (tt, xt) = (&t[t.len() - tail..], &x[x.len() - tail..]);
+    let paths = [
+        dir.join("time.png"),
+        dir.join("phase.png"),
+        dir.join("poincare.png"),
+        dir.join("spectrum.png"),
+        dir.join("overview.png"),
+    ];
+    plot::lines(
+        &paths[0],
+        &format!("{name}: time history ({tag})"),
+        "t / T1 (stage-1 mesh periods)",
+        &format!("{name} / b"),
+        &[Series { label: name, x: tt, y: xt }],
+    )?;
+    plot::phase_portrait(&paths[1], &format!("{name}: phase portrait ({tag})"), &x, &v, Some((&px, &pv)))?;
+    plot::scatter(&paths[2], &format!("{name}: Poincaré section ({tag})"), &format!("{name} / b"), "velocity", &px, &pv)?;
+    plot::spectrum(&paths[3], &format!("{name}: amplitude spectrum ({tag})"), &spec.freq, &spec.amplitude, &markers, 2.5, true)?;
+    plot::panels(
+        &paths[4],
+        &format!("{} — {name}, {tag}, {}", report.model, report.motion_state),
+        2,
+        2,
+        &[
+            Panel {
+                title: "time history (last 10 periods)",
+                x_label: "t / T1",
+                y_label: "x / b",
+                series: vec![Series { label: name, x: tt, y: xt }],
+                dots: false,
+                log_y: false,
+                markers: vec![],
+            },
+            Panel {
+                title: "phase portrait",
+                x_label: "x / b",
+                y_label: "velocity",
+                series: vec![Series { label: name, x: &x, y: &v }],
+                dots: false,
+                log_y: false,
+                markers: vec![],
+            },
+            Panel {
+                title: "Poincaré section",
+                x_label: "x / b",
+                y_label: "velocity",
+                series: vec![Series { label: name, x: &px, y: &pv }],
+                dots: true,
+                log_y: false,
+                markers: vec![],
+            },
+            Panel {
+                title: "spectrum (f / f1)",
+                x_label: "f / f1",
+                y_label: "amplitude",
+                series: vec![Series { label: name, x: sf, y: sa }],
+                dots: false,
+                log_y: true,
+                markers: markers.clone(),
+            },
+        ],
+    )?;
+    Ok(paths.to_vec())
+}
