@@ -1,1 +1,78 @@
-//! Windows and amplitude spectra. (Being written.)
+//! Windows, amplitude spectra and simple signal statistics.
+//!
+//! # Conventions (read this first)
+//!
+//! * **Units.** Samples are in whatever unit the caller uses (m/s², rad, …); amplitudes come
+//!   out in the same unit. Sample rates are in samples per unit of time and frequencies in
+//!   cycles per the same unit of time (Hz for seconds; "per period" for dimensionless time).
+//! * **Spectra are one-sided with *peak amplitude* scaling.** For a record `x[0..N]`, window
+//!   `w[0..N]` and `X_k = Σ_n w[n] x[n] e^{−2πikn/N}` (unnormalised DFT, as computed by
+//!   RustFFT/realfft), the spectrum holds bins `k = 0 ..= N/2` (integer division) in
+//!   **ascending frequency** `f_k = k · fs / N`, with
+//!     - `A_0 = |X_0| / Σw` (DC: the absolute value of the window-weighted mean, i.e. the
+//!       plain mean's magnitude for a rectangular window),
+//!     - `A_k = 2 |X_k| / Σw` for `0 < k < N/2`, and for `k = (N−1)/2` when `N` is odd,
+//!     - `A_{N/2} = |X_{N/2}| / Σw` for the Nyquist bin when `N` is even.
+//!
+//!   So a sine `A sin(2πft + φ)` whose frequency falls on a bin reads `A` at that bin (any
+//!   window); between bins the rectangular and Hann windows read low (scalloping) while the
+//!   flat-top window reads `A` within 0.05 %.
+//! * **No detrending**: the mean is kept (it is the DC bin), except in [`line_amplitude`],
+//!   which removes it.
+//! * **Validation**: every function refuses empty records, NaN/±∞ samples, and non-positive or
+//!   non-finite sample rates with an [`Error::Signal`] or [`Error::InvalidParameter`]
+//!   that says what to change. Nothing here panics on any input. The plain statistics
+//!   [`rms`], [`kurtosis`], [`crest_factor`] return `f64` for convenience and give `NaN` for
+//!   unusable input; their `try_*` twins return the explanatory error instead.
+
+mod plan;
+mod spectrum;
+mod stats;
+mod window;
+
+pub use plan::PlanCache;
+pub use spectrum::{Spectrum, amplitude_spectrum, line_amplitude, welch};
+pub use stats::{crest_factor, kurtosis, rms, try_crest_factor, try_kurtosis, try_rms};
+pub use window::{Window, window};
+
+use crate::{Error, Result};
+
+/// Refuse an empty record or one with a non-finite sample.
+fn check_samples(x: &[f64]) -> Result<()> {
+    if x.is_empty() {
+        return Err(Error::Signal(
+            "the record is empty (0 samples); pass at least one sample".into(),
+        ));
+    }
+    if let Some((i, v)) = x.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(Error::Signal(format!(
+            "sample {i} of {} is {v}; the record must contain only finite numbers \
+             (check the simulation for divergence or the input file for gaps)",
+            x.len()
+        )));
+    }
+    Ok(())
+}
+
+/// Refuse a record shorter than `min` samples (after [`check_samples`]).
+fn check_min_len(x: &[f64], min: usize, what: &str) -> Result<()> {
+    if x.len() < min {
+        return Err(Error::Signal(format!(
+            "{what} needs at least {min} samples, the record has {}; use a longer record",
+            x.len()
+        )));
+    }
+    Ok(())
+}
+
+/// Refuse a non-positive or non-finite sample rate.
+fn check_rate(sample_rate: f64) -> Result<()> {
+    if !(sample_rate.is_finite() && sample_rate > 0.0) {
+        return Err(Error::param(
+            "sample_rate",
+            sample_rate,
+            "must be a finite number > 0 (samples per unit time)",
+        ));
+    }
+    Ok(())
+}

@@ -1,0 +1,126 @@
+//! A thread-safe cache of real-to-complex FFT plans.
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
+
+use realfft::{RealFftPlanner, RealToComplex};
+
+/// A cache of `realfft` forward plans keyed by transform length, shareable between threads.
+///
+/// Planning an FFT (choosing the algorithm, computing twiddle factors) costs far more than one
+/// transform of a short record, so [`amplitude_spectrum`](super::amplitude_spectrum) and
+/// [`welch`](super::welch) take their plans from [`PlanCache::global`]: repeated calls with the
+/// same length plan once. Plans are immutable and `Send + Sync`, so a plan fetched here may be
+/// used from any thread (e.g. inside a rayon parallel iterator); the lock is held only while
+/// looking a plan up or creating it, never during a transform.
+pub struct PlanCache {
+    inner: Mutex<Inner>,
+}
+
+struct Inner {
+    planner: RealFftPlanner<f64>,
+    plans: HashMap<usize, Arc<dyn RealToComplex<f64>>>,
+}
+
+impl Default for PlanCache {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl std::fmt::Debug for PlanCache {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PlanCache")
+            .field("cached_lengths", &self.lengths())
+            .finish()
+    }
+}
+
+impl PlanCache {
+    /// An empty cache.
+    pub fn new() -> Self {
+        PlanCache {
+            inner: Mutex::new(Inner {
+                planner: RealFftPlanner::new(),
+                plans: HashMap::new(),
+            }),
+        }
+    }
+
+    /// The process-wide cache used by the spectrum functions of this module.
+    pub fn global() -> &'static PlanCache {
+        static GLOBAL: OnceLock<PlanCache> = OnceLock::new();
+        GLOBAL.get_or_init(PlanCache::new)
+    }
+
+    /// Lock, recovering from a poisoned mutex (the cache holds no invariant a panic could
+    /// break: at worst a plan is missing and gets planned again).
+    fn lock(&self) -> MutexGuard<'_, Inner> {
+        self.inner.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// The forward real FFT plan for `len` samples (output `len/2 + 1` complex bins,
+    /// unnormalised: `X_k = Σ x_n e^{−2πikn/len}`). Planned on first request, then shared.
+    pub fn forward(&self, len: usize) -> Arc<dyn RealToComplex<f64>> {
+        let mut g = self.lock();
+        if let Some(p) = g.plans.get(&len) {
+            return Arc::clone(p);
+        }
+        let p = g.planner.plan_fft_forward(len);
+        g.plans.insert(len, Arc::clone(&p));
+        p
+    }
+
+    /// Whether a plan for `len` samples is already cached.
+    pub fn contains(&self, len: usize) -> bool {
+        self.lock().plans.contains_key(&len)
+    }
+
+    /// Number of cached plans.
+    pub fn len(&self) -> usize {
+        self.lock().plans.len()
+    }
+
+    /// True if no plan has been cached yet.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The cached lengths, ascending.
+    pub fn lengths(&self) -> Vec<usize> {
+        let mut v: Vec<usize> = self.lock().plans.keys().copied().collect();
+        v.sort_unstable();
+        v
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn same_length_returns_same_plan() {
+        let c = PlanCache::new();
+        assert!(c.is_empty());
+        let a = c.forward(96);
+        let b = c.forward(96);
+        assert!(Arc::ptr_eq(&a, &b));
+        assert_eq!(a.len(), 96);
+        let _ = c.forward(17);
+        assert_eq!(c.lengths(), vec![17, 96]);
+        assert!(c.contains(17) && !c.contains(18));
+    }
+
+    #[test]
+    fn usable_from_many_threads() {
+        let c = PlanCache::new();
+        let plans: Vec<_> = std::thread::scope(|s| {
+            let hs: Vec<_> = (0..4).map(|_| s.spawn(|| c.forward(128))).collect();
+            hs.into_iter().map(|h| h.join().unwrap()).collect()
+        });
+        assert_eq!(c.len(), 1);
+        for p in &plans[1..] {
+            assert!(Arc::ptr_eq(&plans[0], p));
+        }
+    }
+}
