@@ -184,7 +184,11 @@ pub fn parse_range(s: &str) -> Result<(f64, f64, f64)> {
     if parts.len() != 3 {
         bail!("expected START:END:STEP (e.g. 0.01:5:0.01), got `{s}`");
     }
-    let p = |x: &str| -> Result<f64> { x.trim().parse::<f64>().with_context(|| format!("`{x}` is not a number")) };
+    let p = |x: &str| -> Result<f64> {
+        x.trim()
+            .parse::<f64>()
+            .with_context(|| format!("`{x}` is not a number"))
+    };
     let (a, b, c) = (p(parts[0])?, p(parts[1])?, p(parts[2])?);
     if !(a > 0.0 && b >= a && c > 0.0) {
         bail!("need 0 < START ≤ END and STEP > 0, got {a}:{b}:{c}");
@@ -199,7 +203,8 @@ fn write_or_print(path: Option<&Path>, text: &str) -> Result<()> {
     match path {
         Some(p) => {
             if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
-                std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+                std::fs::create_dir_all(dir)
+                    .with_context(|| format!("creating {}", dir.display()))?;
             }
             std::fs::write(p, text).with_context(|| format!("writing {}", p.display()))
         }
@@ -214,7 +219,10 @@ fn wear(args: &RigArgs, ea: f64) -> Result<Wear> {
     if !(ea.is_finite() && ea >= 0.0) {
         bail!("--ea must be a wear degree ≥ 0 (the paper's range is 0.1 … 1), got {ea}");
     }
-    Ok(Wear { ea, planetary: args.planetary_error })
+    Ok(Wear {
+        ea,
+        planetary: args.planetary_error,
+    })
 }
 
 /// Run the CLI.
@@ -321,7 +329,10 @@ fn bifurcation_cmd(a: BifurcationArgs) -> Result<()> {
 }
 
 fn suffixed(p: &Path, name: &str) -> PathBuf {
-    let stem = p.file_stem().and_then(|s| s.to_str()).unwrap_or("bifurcation");
+    let stem = p
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("bifurcation");
     let ext = p.extension().and_then(|s| s.to_str()).unwrap_or("png");
     p.with_file_name(format!("{stem}_{name}.{ext}"))
 }

@@ -5,8 +5,12 @@
 use std::f64::consts::TAU;
 
 use gearwear::analysis::simulate::{RunSpec, Transient, run, run_system};
-use gearwear::model::{Assembly, Damping, Dof, Element, Load, LoadSchedule, ModelAConfig, StiffnessShape, Wear};
-use gearwear::solver::{Dopri5, Dopri5Options, Integrator, OdeSystem, Rk4, advance_to, sample_uniform};
+use gearwear::model::{
+    Assembly, Damping, Dof, Element, Load, LoadSchedule, ModelAConfig, StiffnessShape, Wear,
+};
+use gearwear::solver::{
+    Dopri5, Dopri5Options, Integrator, OdeSystem, Rk4, advance_to, sample_uniform,
+};
 use nalgebra::{DMatrix, DVector};
 use num_complex::Complex64;
 
@@ -58,7 +62,10 @@ impl OneMesh {
             let (sn, cs) = (wd * u).sin_cos();
             let xh = e * (c1 * cs + c2 * sn);
             let vh = e * (-c / 2.0 * (c1 * cs + c2 * sn) + wd * (-c1 * sn + c2 * cs));
-            (xs + p * th.sin() + q * th.cos() + xh, w * (p * th.cos() - q * th.sin()) + vh)
+            (
+                xs + p * th.sin() + q * th.cos() + xh,
+                w * (p * th.cos() - q * th.sin()) + vh,
+            )
         }
     }
 
@@ -132,13 +139,25 @@ impl OneMesh {
 fn one_mesh_assembly(p: &OneMesh) -> Assembly {
     // With b_ref = 1, k = ω_h² J: choose J = 1, k = 1 → ω_h = 1 and all values are the
     // dimensionless ones.
-    let mut el = Element::mesh("x", ("q", 1.0), ("q", 0.0), 1.0, StiffnessShape::Constant, 1.0, Damping::Coefficient(p.c), p.b);
+    let mut el = Element::mesh(
+        "x",
+        ("q", 1.0),
+        ("q", 0.0),
+        1.0,
+        StiffnessShape::Constant,
+        1.0,
+        Damping::Coefficient(p.c),
+        p.b,
+    );
     el = el.with_error(p.a, 1.0, p.phi);
     Assembly {
         name: "one-mesh".into(),
         dofs: vec![Dof::rotation("q", 1.0).unwrap()],
         elements: vec![el],
-        loads: vec![Load { dof: "q".into(), schedule: LoadSchedule::Constant { value: p.f } }],
+        loads: vec![Load {
+            dof: "q".into(),
+            schedule: LoadSchedule::Constant { value: p.f },
+        }],
         length_ref: 1.0,
     }
 }
@@ -146,28 +165,49 @@ fn one_mesh_assembly(p: &OneMesh) -> Assembly {
 #[test]
 fn single_mesh_with_backlash_matches_piecewise_closed_form() {
     // Impacting regime: forcing large enough to cross both clearance edges.
-    let p = OneMesh { c: 0.1, k: 1.0, b: 1.0, f: 0.1, a: 0.8, w: 0.9, phi: 0.3 };
+    let p = OneMesh {
+        c: 0.1,
+        k: 1.0,
+        b: 1.0,
+        f: 0.1,
+        a: 0.8,
+        w: 0.9,
+        phi: 0.3,
+    };
     let model = one_mesh_assembly(&p).resolve().unwrap();
     let sys = model.system(p.w).unwrap();
     let grid: Vec<f64> = (0..=3000).map(|i| i as f64 * 0.02).collect();
     let reference = p.reference(0.0, 0.0, &grid);
     // The reference must really switch regions many times for the test to mean anything.
-    let switches = reference.windows(2).filter(|w| p.region(w[0]) != p.region(w[1])).count();
+    let switches = reference
+        .windows(2)
+        .filter(|w| p.region(w[0]) != p.region(w[1]))
+        .count();
     assert!(switches >= 20, "reference crosses only {switches} times");
 
-    let opts = Dopri5Options { rtol: 1e-10, atol: 1e-12, ..Default::default() };
+    let opts = Dopri5Options {
+        rtol: 1e-10,
+        atol: 1e-12,
+        ..Default::default()
+    };
     let mut integ = Dopri5::new(&sys, 0.0, &[0.0, 0.0], opts).unwrap();
     let mut max_err: f64 = 0.0;
     sample_uniform(&mut integ, 0.0, 0.02, 60.0, |k, _, y| {
         max_err = max_err.max((y[0] - reference[k]).abs());
     })
     .unwrap();
-    assert!(max_err < 1e-7, "DOPRI5 with switch location: max error {max_err:e}");
+    assert!(
+        max_err < 1e-7,
+        "DOPRI5 with switch location: max error {max_err:e}"
+    );
     assert!(integ.stats().switches > 0);
 
     // Without switch location at the same tolerance the error is larger: the kinks cost
     // accuracy (or steps). This is what locating them buys.
-    let opts_nl = Dopri5Options { locate_switches: false, ..opts };
+    let opts_nl = Dopri5Options {
+        locate_switches: false,
+        ..opts
+    };
     let mut plain = Dopri5::new(&sys, 0.0, &[0.0, 0.0], opts_nl).unwrap();
     let mut err_plain: f64 = 0.0;
     sample_uniform(&mut plain, 0.0, 0.02, 60.0, |k, _, y| {
@@ -187,7 +227,15 @@ fn single_mesh_with_backlash_matches_piecewise_closed_form() {
 #[test]
 fn rk4_converges_at_fourth_order_on_a_smooth_piece() {
     // No backlash: smooth, so RK4's global error falls 16× per halving of the step.
-    let p = OneMesh { c: 0.1, k: 1.0, b: 0.0, f: 0.1, a: 0.3, w: 0.7, phi: 0.0 };
+    let p = OneMesh {
+        c: 0.1,
+        k: 1.0,
+        b: 0.0,
+        f: 0.1,
+        a: 0.3,
+        w: 0.7,
+        phi: 0.0,
+    };
     let model = one_mesh_assembly(&p).resolve().unwrap();
     let sys = model.system(p.w).unwrap();
     let exact = p.solve(1, 0.0, 0.0, 0.0, 20.0).0;
@@ -199,27 +247,48 @@ fn rk4_converges_at_fourth_order_on_a_smooth_piece() {
     let (e1, e2, e3) = (err(0.1), err(0.05), err(0.025));
     for (a, b) in [(e1, e2), (e2, e3)] {
         let order = (a / b).log2();
-        assert!((3.6..4.6).contains(&order), "observed order {order} ({a:e} → {b:e})");
+        assert!(
+            (3.6..4.6).contains(&order),
+            "observed order {order} ({a:e} → {b:e})"
+        );
     }
 }
 
 #[test]
 fn dopri5_error_falls_with_tolerance() {
-    let p = OneMesh { c: 0.1, k: 1.0, b: 1.0, f: 0.1, a: 0.8, w: 0.9, phi: 0.3 };
+    let p = OneMesh {
+        c: 0.1,
+        k: 1.0,
+        b: 1.0,
+        f: 0.1,
+        a: 0.8,
+        w: 0.9,
+        phi: 0.3,
+    };
     let model = one_mesh_assembly(&p).resolve().unwrap();
     let sys = model.system(p.w).unwrap();
     let grid: Vec<f64> = (0..=1500).map(|i| i as f64 * 0.02).collect();
     let reference = p.reference(0.0, 0.0, &grid);
     let err_at = |rtol: f64| {
-        let opts = Dopri5Options { rtol, atol: rtol * 1e-2, ..Default::default() };
+        let opts = Dopri5Options {
+            rtol,
+            atol: rtol * 1e-2,
+            ..Default::default()
+        };
         let mut integ = Dopri5::new(&sys, 0.0, &[0.0, 0.0], opts).unwrap();
         let mut e: f64 = 0.0;
-        sample_uniform(&mut integ, 0.0, 0.02, 30.0, |k, _, y| e = e.max((y[0] - reference[k]).abs())).unwrap();
+        sample_uniform(&mut integ, 0.0, 0.02, 30.0, |k, _, y| {
+            e = e.max((y[0] - reference[k]).abs())
+        })
+        .unwrap();
         e
     };
     let (e6, e9) = (err_at(1e-6), err_at(1e-9));
     assert!(e6 < 1e-4, "rtol 1e-6: {e6:e}");
-    assert!(e9 < e6 / 100.0, "tightening the tolerance 1000× gained only {e6:e} → {e9:e}");
+    assert!(
+        e9 < e6 / 100.0,
+        "tightening the tolerance 1000× gained only {e6:e} → {e9:e}"
+    );
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -274,7 +343,13 @@ impl OdeSystem for PhysicalModelA {
         let mut f = [0.0; 10];
         for m in 0..10 {
             let kt = self.k[m] * (1.0 + self.eps * (self.w[m] * t).cos());
-            let fb = if x[m] > self.b { x[m] - self.b } else if x[m] < -self.b { x[m] + self.b } else { 0.0 };
+            let fb = if x[m] > self.b {
+                x[m] - self.b
+            } else if x[m] < -self.b {
+                x[m] + self.b
+            } else {
+                0.0
+            };
             f[m] = kt * fb + self.c[m] * v[m];
         }
         let [r1, r2, r3, r4, rs, rp, rc] = self.r;
@@ -300,7 +375,11 @@ impl OdeSystem for PhysicalModelA {
 fn relative_form_matches_an_independent_physical_model() {
     let cfg = ModelAConfig::default_rig();
     let ea = 0.6;
-    let model = cfg.assembly(Wear::fixed_axis(ea)).unwrap().resolve().unwrap();
+    let model = cfg
+        .assembly(Wear::fixed_axis(ea))
+        .unwrap()
+        .resolve()
+        .unwrap();
     let omega1 = 0.9;
     // Physical parameters from the same config, computed here by hand.
     let mm = 1e-3;
@@ -316,7 +395,16 @@ fn relative_form_matches_an_independent_physical_model() {
     ];
     let jp = g.planet.inertia;
     let jc = cfg.carrier.inertia + 4.0 * cfg.assumed.planet_mass_kg * r[6] * r[6];
-    let j = [g.g1.inertia, g.g2.inertia + g.g3.inertia, g.g4.inertia + g.sun.inertia, jp, jp, jp, jp, jc];
+    let j = [
+        g.g1.inertia,
+        g.g2.inertia + g.g3.inertia,
+        g.g4.inertia + g.sun.inertia,
+        jp,
+        jp,
+        jp,
+        jp,
+        jc,
+    ];
     let wh = model.omega_h;
     let a11 = r[0] * r[0] / j[0] + r[1] * r[1] / j[1];
     assert!((wh - TAU * 870.0).abs() < 1e-6 * wh);
@@ -338,7 +426,9 @@ fn relative_form_matches_an_independent_physical_model() {
             _ => rp * rp / jp + rc * rc / jc,
         }
     };
-    let c: Vec<f64> = (0..10).map(|m| 2.0 * cfg.damping_ratio * (k[m] / inv_me(m)).sqrt()).collect();
+    let c: Vec<f64> = (0..10)
+        .map(|m| 2.0 * cfg.damping_ratio * (k[m] / inv_me(m)).sqrt())
+        .collect();
     let b_ref = cfg.length_ref_um * 1e-6;
     let fr = cfg.tooth_counts().frequencies();
     let wmesh = omega1 * wh; // rad/s
@@ -369,12 +459,37 @@ fn relative_form_matches_an_independent_physical_model() {
         y0[10 + m] = -ea_v[m] / b_ref * w[m] / wh;
     }
     let t_end_tau = 60.0;
-    let opts = Dopri5Options { rtol: 1e-10, atol: 1e-13, ..Default::default() };
+    let opts = Dopri5Options {
+        rtol: 1e-10,
+        atol: 1e-13,
+        ..Default::default()
+    };
     let sys = model.system(omega1).unwrap();
-    let mut rel = Dopri5::new(&sys, 0.0, &y0, Dopri5Options { atol: 1e-10, ..opts }).unwrap();
+    let mut rel = Dopri5::new(
+        &sys,
+        0.0,
+        &y0,
+        Dopri5Options {
+            atol: 1e-10,
+            ..opts
+        },
+    )
+    .unwrap();
     let mut rel_samples = Vec::new();
-    sample_uniform(&mut rel, 0.0, 0.5, t_end_tau, |_, _, y| rel_samples.push(y[..10].to_vec())).unwrap();
-    let mut ph = Dopri5::new(&phys, 0.0, &[0.0; 16], Dopri5Options { atol: 1e-16, ..opts }).unwrap();
+    sample_uniform(&mut rel, 0.0, 0.5, t_end_tau, |_, _, y| {
+        rel_samples.push(y[..10].to_vec())
+    })
+    .unwrap();
+    let mut ph = Dopri5::new(
+        &phys,
+        0.0,
+        &[0.0; 16],
+        Dopri5Options {
+            atol: 1e-16,
+            ..opts
+        },
+    )
+    .unwrap();
     let mut max_err: f64 = 0.0;
     let mut max_amp: f64 = 0.0;
     sample_uniform(&mut ph, 0.0, 0.5 / wh, t_end_tau / wh, |kk, t, y| {
@@ -386,8 +501,14 @@ fn relative_form_matches_an_independent_physical_model() {
         }
     })
     .unwrap();
-    assert!(max_amp > 0.5, "the comparison must exercise real motion (max |x̄| = {max_amp})");
-    assert!(max_err < 1e-5 * max_amp.max(1.0), "relative vs physical form: max |Δx̄| = {max_err:e}");
+    assert!(
+        max_amp > 0.5,
+        "the comparison must exercise real motion (max |x̄| = {max_amp})"
+    );
+    assert!(
+        max_err < 1e-5 * max_amp.max(1.0),
+        "relative vs physical form: max |Δx̄| = {max_err:e}"
+    );
 }
 
 #[test]
@@ -397,7 +518,11 @@ fn model_a_a_matrix_entries_match_model_md() {
     let m = asm.resolve().unwrap();
     let mm = 1e-3;
     let g = &cfg.gears;
-    let (r1, r2, r3) = (g.g1.base_radius_mm * mm, g.g2.base_radius_mm * mm, g.g3.base_radius_mm * mm);
+    let (r1, r2, r3) = (
+        g.g1.base_radius_mm * mm,
+        g.g2.base_radius_mm * mm,
+        g.g3.base_radius_mm * mm,
+    );
     let jb = g.g2.inertia + g.g3.inertia;
     let a11 = r1 * r1 / g.g1.inertia + r2 * r2 / jb;
     // Row 1 of the paper's equation: A11 = 1/me1, A12 = −r2 r3 / JB.
@@ -406,7 +531,13 @@ fn model_a_a_matrix_entries_match_model_md() {
     assert!((m.a[(0, 0)] - 1.0).abs() < 1e-15);
     // Symmetric, rank 7 (10 meshes, 8 coordinates, one rigid-body mode).
     assert!((&m.a - m.a.transpose()).abs().max() < 1e-12);
-    let rank = m.a.clone().svd(false, false).singular_values.iter().filter(|s| **s > 1e-9).count();
+    let rank =
+        m.a.clone()
+            .svd(false, false)
+            .singular_values
+            .iter()
+            .filter(|s| **s > 1e-9)
+            .count();
     assert_eq!(rank, 7);
     // Three constraint combinations: xsp_n + xrp_n − (xsp_1 + xrp_1) is in A's left null space.
     for n in 1..4 {
@@ -441,7 +572,10 @@ fn static_deflection_matches_the_free_body_balance() {
     let model = cfg.assembly(w).unwrap().resolve().unwrap();
     let mut spec = RunSpec::paper(0.5);
     spec.periods = 2;
-    spec.transient = Transient { tau: 1500.0, periods: 0.0 };
+    spec.transient = Transient {
+        tau: 1500.0,
+        periods: 0.0,
+    };
     let traj = run(&model, &spec).unwrap();
     let mm = 1e-3;
     let g = &cfg.gears;
@@ -464,8 +598,17 @@ fn static_deflection_matches_the_free_body_balance() {
     ];
     let last = traj.len() - 1;
     let x = |j: usize| traj.states[last * traj.dim + j];
-    for (j, e) in [(0, expected[0]), (1, expected[1]), (2, expected[2]), (9, expected[3])] {
-        assert!((x(j) - e).abs() < 1e-5, "mesh {j}: {} vs free-body {e}", x(j));
+    for (j, e) in [
+        (0, expected[0]),
+        (1, expected[1]),
+        (2, expected[2]),
+        (9, expected[3]),
+    ] {
+        assert!(
+            (x(j) - e).abs() < 1e-5,
+            "mesh {j}: {} vs free-body {e}",
+            x(j)
+        );
     }
 }
 
@@ -475,7 +618,11 @@ fn linear_limit_matches_the_complex_frequency_response() {
     // steady state x_s + Σ Im(X e^{i(Ωτ+φ)}) with (−Ω² I + iΩ Ā C + Ā K) X = ē Ω².
     let cfg = linear_config();
     let ea = 0.5;
-    let model = cfg.assembly(Wear::fixed_axis(ea)).unwrap().resolve().unwrap();
+    let model = cfg
+        .assembly(Wear::fixed_axis(ea))
+        .unwrap()
+        .resolve()
+        .unwrap();
     let omega1 = 0.7;
     let n = model.n();
     let kd = DMatrix::from_diagonal(&DVector::from_vec(model.k_ratio.clone()));
@@ -516,15 +663,27 @@ fn linear_limit_matches_the_complex_frequency_response() {
         let rhs = DVector::from_vec(f.to_vec());
         m.lu().solve(&rhs).unwrap().iter().cloned().collect()
     };
-    let xs_parts: Vec<(f64, Vec<Complex64>)> = parts.iter().map(|(w, f)| (*w, response(*w, f))).collect();
+    let xs_parts: Vec<(f64, Vec<Complex64>)> =
+        parts.iter().map(|(w, f)| (*w, response(*w, f))).collect();
     let analytic = |tau: f64, j: usize| -> f64 {
-        xs[j] + xs_parts.iter().map(|(w, x)| (x[j] * Complex64::from_polar(1.0, w * tau)).im).sum::<f64>()
+        xs[j]
+            + xs_parts
+                .iter()
+                .map(|(w, x)| (x[j] * Complex64::from_polar(1.0, w * tau)).im)
+                .sum::<f64>()
     };
     let mut spec = RunSpec::paper(omega1);
     spec.periods = 10;
     spec.samples_per_period = 32;
-    spec.transient = Transient { tau: 1500.0, periods: 0.0 };
-    spec.solver = Dopri5Options { rtol: 1e-9, atol: 1e-11, ..Default::default() };
+    spec.transient = Transient {
+        tau: 1500.0,
+        periods: 0.0,
+    };
+    spec.solver = Dopri5Options {
+        rtol: 1e-9,
+        atol: 1e-11,
+        ..Default::default()
+    };
     let traj = run(&model, &spec).unwrap();
     let mut max_err: f64 = 0.0;
     let mut amp: f64 = 0.0;
@@ -535,8 +694,14 @@ fn linear_limit_matches_the_complex_frequency_response() {
             amp = amp.max((a - xs[j]).abs());
         }
     }
-    assert!(amp > 0.05, "the forced response must be visible (amplitude {amp})");
-    assert!(max_err < 1e-5, "linear limit: max error {max_err:e} (dynamic amplitude {amp})");
+    assert!(
+        amp > 0.05,
+        "the forced response must be visible (amplitude {amp})"
+    );
+    assert!(
+        max_err < 1e-5,
+        "linear limit: max error {max_err:e} (dynamic amplitude {amp})"
+    );
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -546,16 +711,27 @@ fn linear_limit_matches_the_complex_frequency_response() {
 #[test]
 fn dopri5_agrees_with_tiny_step_rk4_on_model_a() {
     let cfg = ModelAConfig::default_rig();
-    let model = cfg.assembly(Wear::fixed_axis(0.4)).unwrap().resolve().unwrap();
+    let model = cfg
+        .assembly(Wear::fixed_axis(0.4))
+        .unwrap()
+        .resolve()
+        .unwrap();
     let sys = model.system(1.0).unwrap();
     let t_end = 40.0; // short enough that chaos has not amplified differences
     let mut rk = Rk4::new(&sys, 0.0, &[0.0; 20], 2e-4).unwrap();
     let mut rk_s = Vec::new();
     sample_uniform(&mut rk, 0.0, 0.1, t_end, |_, _, y| rk_s.push(y[0])).unwrap();
-    let opts = Dopri5Options { rtol: 1e-9, atol: 1e-11, ..Default::default() };
+    let opts = Dopri5Options {
+        rtol: 1e-9,
+        atol: 1e-11,
+        ..Default::default()
+    };
     let mut dp = Dopri5::new(&sys, 0.0, &[0.0; 20], opts).unwrap();
     let mut max_err: f64 = 0.0;
-    sample_uniform(&mut dp, 0.0, 0.1, t_end, |k, _, y| max_err = max_err.max((y[0] - rk_s[k]).abs())).unwrap();
+    sample_uniform(&mut dp, 0.0, 0.1, t_end, |k, _, y| {
+        max_err = max_err.max((y[0] - rk_s[k]).abs())
+    })
+    .unwrap();
     assert!(dp.stats().switches > 0, "the run must cross the clearance");
     assert!(max_err < 1e-6, "DOPRI5 vs RK4(h = 2e-4): {max_err:e}");
 }
@@ -566,7 +742,11 @@ fn dopri5_agrees_with_tiny_step_rk4_on_model_a() {
 
 #[test]
 fn samples_land_on_the_requested_grid() {
-    let model = ModelAConfig::default_rig().assembly(Wear::fixed_axis(0.3)).unwrap().resolve().unwrap();
+    let model = ModelAConfig::default_rig()
+        .assembly(Wear::fixed_axis(0.3))
+        .unwrap()
+        .resolve()
+        .unwrap();
     let mut spec = RunSpec::paper(1.3);
     spec.periods = 3;
     let traj = run(&model, &spec).unwrap();

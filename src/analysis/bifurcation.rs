@@ -44,7 +44,11 @@ pub fn grid(start: f64, end: f64, step: f64) -> Vec<f64> {
 }
 
 /// Run one grid point.
-pub fn point(model: &DimensionlessModel, spec: &RunSpec, elements: &[usize]) -> Result<BifurcationPoint> {
+pub fn point(
+    model: &DimensionlessModel,
+    spec: &RunSpec,
+    elements: &[usize],
+) -> Result<BifurcationPoint> {
     let sys = model.system(spec.omega1)?;
     let n = model.n();
     let spp = spec.samples_per_period;
@@ -63,7 +67,10 @@ pub fn point(model: &DimensionlessModel, spec: &RunSpec, elements: &[usize]) -> 
         let v = y[n + elements[0]];
         v_range = (v_range.0.min(v), v_range.1.max(v));
     })?;
-    let scale = ((range[0].1 - range[0].0).max(1e-12), (v_range.1 - v_range.0).max(1e-12));
+    let scale = (
+        (range[0].1 - range[0].0).max(1e-12),
+        (v_range.1 - v_range.0).max(1e-12),
+    );
     let state = classify(&poincare[0], scale, &ClassifyOptions::default())?.state;
     Ok(BifurcationPoint {
         omega1: spec.omega1,

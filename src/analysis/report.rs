@@ -155,11 +155,19 @@ pub fn plot_run(
     let n = traj.dim / 2;
     let x = traj.series(element);
     let v = traj.series(n + element);
-    let t: Vec<f64> = traj.tau.iter().map(|t| (t - traj.tau[0]) * traj.omega1 / std::f64::consts::TAU).collect();
+    let t: Vec<f64> = traj
+        .tau
+        .iter()
+        .map(|t| (t - traj.tau[0]) * traj.omega1 / std::f64::consts::TAU)
+        .collect();
     let (px, pv): (Vec<f64>, Vec<f64>) = report.poincare.iter().cloned().unzip();
     let spec = signal::amplitude_spectrum(&x, traj.sample_rate_per_f1(), Window::Hann)?;
     let markers = Lines::markers(fr);
-    let band = spec.freq.iter().position(|&f| f > 2.5).unwrap_or(spec.freq.len());
+    let band = spec
+        .freq
+        .iter()
+        .position(|&f| f > 2.5)
+        .unwrap_or(spec.freq.len());
     let (sf, sa) = (&spec.freq[..band], &spec.amplitude[..band]);
     let name = &report.element;
     let tag = format!("Ω1 = {:.3}, ea = {:.2}", report.omega1, report.ea);
@@ -178,11 +186,36 @@ pub fn plot_run(
         &format!("{name}: time history ({tag})"),
         "t / T1 (stage-1 mesh periods)",
         &format!("{name} / b"),
-        &[Series { label: name, x: tt, y: xt }],
+        &[Series {
+            label: name,
+            x: tt,
+            y: xt,
+        }],
     )?;
-    plot::phase_portrait(&paths[1], &format!("{name}: phase portrait ({tag})"), &x, &v, Some((&px, &pv)))?;
-    plot::scatter(&paths[2], &format!("{name}: Poincaré section ({tag})"), &format!("{name} / b"), "velocity", &px, &pv)?;
-    plot::spectrum(&paths[3], &format!("{name}: amplitude spectrum ({tag})"), &spec.freq, &spec.amplitude, &markers, 2.5, true)?;
+    plot::phase_portrait(
+        &paths[1],
+        &format!("{name}: phase portrait ({tag})"),
+        &x,
+        &v,
+        Some((&px, &pv)),
+    )?;
+    plot::scatter(
+        &paths[2],
+        &format!("{name}: Poincaré section ({tag})"),
+        &format!("{name} / b"),
+        "velocity",
+        &px,
+        &pv,
+    )?;
+    plot::spectrum(
+        &paths[3],
+        &format!("{name}: amplitude spectrum ({tag})"),
+        &spec.freq,
+        &spec.amplitude,
+        &markers,
+        2.5,
+        true,
+    )?;
     plot::panels(
         &paths[4],
         &format!("{} — {name}, {tag}, {}", report.model, report.motion_state),
@@ -193,7 +226,11 @@ pub fn plot_run(
                 title: "time history (last 10 periods)",
                 x_label: "t / T1",
                 y_label: "x / b",
-                series: vec![Series { label: name, x: tt, y: xt }],
+                series: vec![Series {
+                    label: name,
+                    x: tt,
+                    y: xt,
+                }],
                 dots: false,
                 log_y: false,
                 markers: vec![],
@@ -202,7 +239,11 @@ pub fn plot_run(
                 title: "phase portrait",
                 x_label: "x / b",
                 y_label: "velocity",
-                series: vec![Series { label: name, x: &x, y: &v }],
+                series: vec![Series {
+                    label: name,
+                    x: &x,
+                    y: &v,
+                }],
                 dots: false,
                 log_y: false,
                 markers: vec![],
@@ -211,7 +252,11 @@ pub fn plot_run(
                 title: "Poincaré section",
                 x_label: "x / b",
                 y_label: "velocity",
-                series: vec![Series { label: name, x: &px, y: &pv }],
+                series: vec![Series {
+                    label: name,
+                    x: &px,
+                    y: &pv,
+                }],
                 dots: true,
                 log_y: false,
                 markers: vec![],
@@ -220,7 +265,11 @@ pub fn plot_run(
                 title: "spectrum (f / f1)",
                 x_label: "f / f1",
                 y_label: "amplitude",
-                series: vec![Series { label: name, x: sf, y: sa }],
+                series: vec![Series {
+                    label: name,
+                    x: sf,
+                    y: sa,
+                }],
                 dots: false,
                 log_y: true,
                 markers: markers.clone(),

@@ -11,7 +11,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 use crate::model::DimensionlessModel;
-use crate::solver::{Dopri5, Dopri5Options, Integrator, OdeSystem, Stats, advance_to, sample_uniform};
+use crate::solver::{
+    Dopri5, Dopri5Options, Integrator, OdeSystem, Stats, advance_to, sample_uniform,
+};
 
 /// How long to wait before sampling: `max(tau, periods · T1)`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -107,14 +109,24 @@ impl Trajectory {
     }
     /// Component `i` of the state over time.
     pub fn series(&self, i: usize) -> Vec<f64> {
-        self.states.iter().skip(i).step_by(self.dim).copied().collect()
+        self.states
+            .iter()
+            .skip(i)
+            .step_by(self.dim)
+            .copied()
+            .collect()
     }
     /// Poincaré points `(x̄_j, x̄'_j)` of element `j`, once per stage-1 mesh period.
     pub fn poincare(&self, j: usize) -> Vec<(f64, f64)> {
         let n = self.dim / 2;
         (0..self.len())
             .step_by(self.samples_per_period)
-            .map(|k| (self.states[k * self.dim + j], self.states[k * self.dim + n + j]))
+            .map(|k| {
+                (
+                    self.states[k * self.dim + j],
+                    self.states[k * self.dim + n + j],
+                )
+            })
             .collect()
     }
     /// Sample rate in samples per stage-1 mesh period (so frequency is in units of f1).
@@ -135,7 +147,11 @@ pub fn run_system<S: OdeSystem>(sys: &S, spec: &RunSpec) -> Result<Trajectory> {
     run_inner(sys, None, spec)
 }
 
-fn run_inner<S: OdeSystem>(sys: &S, model: Option<&DimensionlessModel>, spec: &RunSpec) -> Result<Trajectory> {
+fn run_inner<S: OdeSystem>(
+    sys: &S,
+    model: Option<&DimensionlessModel>,
+    spec: &RunSpec,
+) -> Result<Trajectory> {
     let dim = sys.dim();
     let n_samples = spec.periods * spec.samples_per_period;
     let mut tau = Vec::with_capacity(n_samples);

@@ -74,7 +74,12 @@ impl Assembly {
         // Null space from the eigen-decomposition of GᵀG (symmetric, small).
         let gtg = g.transpose() * &g;
         let eig = gtg.symmetric_eigen();
-        let scale = eig.eigenvalues.iter().cloned().fold(0.0_f64, f64::max).max(1e-300);
+        let scale = eig
+            .eigenvalues
+            .iter()
+            .cloned()
+            .fold(0.0_f64, f64::max)
+            .max(1e-300);
         let cols: Vec<DVector<f64>> = (0..m)
             .filter(|&i| eig.eigenvalues[i].abs() < 1e-10 * scale)
             .map(|i| eig.eigenvectors.column(i).into_owned())
@@ -108,7 +113,11 @@ impl Assembly {
         }
         if let Some(i) = balancing {
             // Balance against the loads at t = 0 (the steady operating point).
-            let t0 = if t == 0.0 { tv.clone() } else { self.load_vector_unbalanced(0.0)? };
+            let t0 = if t == 0.0 {
+                tv.clone()
+            } else {
+                self.load_vector_unbalanced(0.0)?
+            };
             let n = self.rigid_modes()?;
             if n.ncols() != 1 {
                 return Err(Error::InvalidConfig(format!(
@@ -146,12 +155,17 @@ impl Assembly {
     /// Check the assembly (names, parameters, a usable reference element).
     pub fn validate(&self) -> Result<()> {
         if self.elements.is_empty() || self.dofs.is_empty() {
-            return Err(Error::InvalidConfig("an assembly needs coordinates and elements".into()));
+            return Err(Error::InvalidConfig(
+                "an assembly needs coordinates and elements".into(),
+            ));
         }
         let mut seen = HashMap::new();
         for d in &self.dofs {
             if seen.insert(d.name.as_str(), ()).is_some() {
-                return Err(Error::InvalidConfig(format!("coordinate `{}` defined twice", d.name)));
+                return Err(Error::InvalidConfig(format!(
+                    "coordinate `{}` defined twice",
+                    d.name
+                )));
             }
             Dof::rotation(d.name.clone(), d.inertia)?;
         }
@@ -162,7 +176,11 @@ impl Assembly {
             }
         }
         if !(self.length_ref.is_finite() && self.length_ref > 0.0) {
-            return Err(Error::param("length_ref", self.length_ref, "must be positive"));
+            return Err(Error::param(
+                "length_ref",
+                self.length_ref,
+                "must be positive",
+            ));
         }
         if self.elements[0].freq_ratio != 1.0 {
             return Err(Error::param(

@@ -213,7 +213,13 @@ impl Element {
     }
 
     /// A torsional shaft between two rotations: `d = θ_a − θ_b`, stiffness in N·m/rad.
-    pub fn shaft(name: impl Into<String>, a: &str, b: &str, stiffness: f64, damping: Damping) -> Self {
+    pub fn shaft(
+        name: impl Into<String>,
+        a: &str,
+        b: &str,
+        stiffness: f64,
+        damping: Damping,
+    ) -> Self {
         Element {
             name: name.into(),
             kind: "shaft".into(),
@@ -271,10 +277,16 @@ impl Element {
     pub fn validate(&self) -> Result<()> {
         let n = &self.name;
         if self.terms.is_empty() {
-            return Err(Error::InvalidConfig(format!("element {n} couples no coordinate")));
+            return Err(Error::InvalidConfig(format!(
+                "element {n} couples no coordinate"
+            )));
         }
         if !(self.stiffness.is_finite() && self.stiffness > 0.0) {
-            return Err(Error::param(format!("{n}: stiffness"), self.stiffness, "must be positive"));
+            return Err(Error::param(
+                format!("{n}: stiffness"),
+                self.stiffness,
+                "must be positive",
+            ));
         }
         match self.damping {
             Damping::Ratio(x) | Damping::Coefficient(x) if !(x.is_finite() && x >= 0.0) => {
@@ -283,10 +295,18 @@ impl Element {
             _ => {}
         }
         if !(self.backlash.is_finite() && self.backlash >= 0.0) {
-            return Err(Error::param(format!("{n}: backlash"), self.backlash, "must be ≥ 0"));
+            return Err(Error::param(
+                format!("{n}: backlash"),
+                self.backlash,
+                "must be ≥ 0",
+            ));
         }
         if !(self.freq_ratio.is_finite() && self.freq_ratio >= 0.0) {
-            return Err(Error::param(format!("{n}: frequency ratio"), self.freq_ratio, "must be ≥ 0"));
+            return Err(Error::param(
+                format!("{n}: frequency ratio"),
+                self.freq_ratio,
+                "must be ≥ 0",
+            ));
         }
         if self.freq_ratio == 0.0 && !matches!(self.shape, StiffnessShape::Constant) {
             return Err(Error::InvalidConfig(format!(
@@ -295,7 +315,11 @@ impl Element {
         }
         for h in &self.error {
             if !(h.amplitude.is_finite() && h.freq_ratio.is_finite() && h.phase.is_finite()) {
-                return Err(Error::param(format!("{n}: error harmonic"), h.amplitude, "must be finite"));
+                return Err(Error::param(
+                    format!("{n}: error harmonic"),
+                    h.amplitude,
+                    "must be finite",
+                ));
             }
         }
         self.shape.validate(n)

@@ -53,7 +53,9 @@ impl ModelExport {
             model: m.name.clone(),
             equation: EQUATION,
             order: m.names.clone(),
-            a: (0..n).map(|i| (0..n).map(|j| m.a[(i, j)]).collect()).collect(),
+            a: (0..n)
+                .map(|i| (0..n).map(|j| m.a[(i, j)]).collect())
+                .collect(),
             k_ratio: m.k_ratio.clone(),
             eps: m
                 .shape
@@ -72,7 +74,12 @@ impl ModelExport {
                 .error
                 .iter()
                 .zip(&m.omega_ratio)
-                .map(|(hs, r)| hs.iter().filter(|h| h.freq_ratio == *r).map(|h| h.amplitude).sum())
+                .map(|(hs, r)| {
+                    hs.iter()
+                        .filter(|h| h.freq_ratio == *r)
+                        .map(|h| h.amplitude)
+                        .sum()
+                })
                 .collect(),
             stiffness_shape: m.shape.clone(),
             omega_h_rad_s: m.omega_h,

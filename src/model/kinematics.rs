@@ -56,11 +56,19 @@ impl ToothCounts {
             ("planets", self.planets),
         ] {
             if z == 0 {
-                return Err(Error::param(name, 0.0, "tooth counts and the planet count must be positive"));
+                return Err(Error::param(
+                    name,
+                    0.0,
+                    "tooth counts and the planet count must be positive",
+                ));
             }
         }
         if self.zr <= self.zs {
-            return Err(Error::param("zr", self.zr as f64, "the ring must have more teeth than the sun"));
+            return Err(Error::param(
+                "zr",
+                self.zr as f64,
+                "the ring must have more teeth than the sun",
+            ));
         }
         Ok(())
     }
@@ -100,7 +108,16 @@ mod tests {
     use super::*;
 
     fn rig() -> ToothCounts {
-        ToothCounts { z1: 29, z2: 100, z3: 36, z4: 90, zs: 28, zp: 36, zr: 100, planets: 4 }
+        ToothCounts {
+            z1: 29,
+            z2: 100,
+            z3: 36,
+            z4: 90,
+            zs: 28,
+            zp: 36,
+            zr: 100,
+            planets: 4,
+        }
     }
 
     #[test]

@@ -8,8 +8,8 @@
 //! - [`rig_a`]: the first seed's rig (Model A) as a configuration.
 
 pub mod assembly;
-pub mod export;
 pub mod element;
+pub mod export;
 pub mod kinematics;
 pub mod rig_a;
 pub mod system;

@@ -106,14 +106,18 @@ pub struct Wear {
 impl Wear {
     /// Fixed-axis wear `ea` with the baseline planetary error.
     pub fn fixed_axis(ea: f64) -> Self {
-        Wear { ea, planetary: None }
+        Wear {
+            ea,
+            planetary: None,
+        }
     }
 }
 
 impl ModelAConfig {
     /// The committed default rig.
     pub fn default_rig() -> Self {
-        Self::from_toml(DEFAULT_CONFIG, "configs/model_a.toml").expect("the committed Model A config parses")
+        Self::from_toml(DEFAULT_CONFIG, "configs/model_a.toml")
+            .expect("the committed Model A config parses")
     }
 
     /// Parse a TOML configuration (`origin` names it in errors).
@@ -162,7 +166,9 @@ impl ModelAConfig {
                 double_to_single: s.double_to_single,
                 smoothing: s.smoothing,
             },
-            None => StiffnessShape::FirstHarmonic { eps: self.assumed.fluctuation },
+            None => StiffnessShape::FirstHarmonic {
+                eps: self.assumed.fluctuation,
+            },
         }
     }
 
@@ -183,7 +189,11 @@ impl ModelAConfig {
             g.g3.base_radius_mm * mm,
             g.g4.base_radius_mm * mm,
         );
-        let (rs, rp, rc) = (g.sun.base_radius_mm * mm, g.planet.base_radius_mm * mm, self.carrier.radius_mm * mm);
+        let (rs, rp, rc) = (
+            g.sun.base_radius_mm * mm,
+            g.planet.base_radius_mm * mm,
+            self.carrier.radius_mm * mm,
+        );
         let a = &self.assumed;
         let b_ref = self.length_ref_um * 1e-6;
         let b = self.half_clearance * b_ref;
@@ -205,45 +215,97 @@ impl ModelAConfig {
         let a11 = r1 * r1 / g.g1.inertia + r2 * r2 / (g.g2.inertia + g.g3.inertia);
         let wh = std::f64::consts::TAU * self.reference_frequency_hz;
         if !(wh.is_finite() && wh > 0.0) {
-            return Err(Error::param("reference_frequency_hz", self.reference_frequency_hz, "must be positive"));
+            return Err(Error::param(
+                "reference_frequency_hz",
+                self.reference_frequency_hz,
+                "must be positive",
+            ));
         }
         let k1 = wh * wh / a11;
         let shape = self.shape();
         let damp = Damping::Ratio(self.damping_ratio);
         let ph = a.phase;
         let mut elements = vec![
-            Element::mesh("x1", ("theta1", r1), ("thetaB", r2), k1, shape, 1.0, damp, b)
-                .with_error(wear.ea * b_ref, 1.0, ph)
-                .with_phase(ph),
-            Element::mesh("x2", ("thetaB", r3), ("thetaC", r4), k1 * a.stiffness_ratio_stage2, shape, fr.f2, damp, b)
-                .with_error(wear.ea * b_ref, fr.f2, ph)
-                .with_phase(ph),
+            Element::mesh(
+                "x1",
+                ("theta1", r1),
+                ("thetaB", r2),
+                k1,
+                shape,
+                1.0,
+                damp,
+                b,
+            )
+            .with_error(wear.ea * b_ref, 1.0, ph)
+            .with_phase(ph),
+            Element::mesh(
+                "x2",
+                ("thetaB", r3),
+                ("thetaC", r4),
+                k1 * a.stiffness_ratio_stage2,
+                shape,
+                fr.f2,
+                damp,
+                b,
+            )
+            .with_error(wear.ea * b_ref, fr.f2, ph)
+            .with_phase(ph),
         ];
         for n in 1..=np {
             let p = format!("thetap{n}");
             elements.push(
-                Element::mesh(format!("xsp{n}"), ("thetaC", rs), (&p, rp), k1 * a.stiffness_ratio_sun_planet, shape, fr.f3, damp, b)
-                    .with_term("thetac", -rc)
-                    .with_error(planetary * b_ref, fr.f3, ph)
-                    .with_phase(ph),
+                Element::mesh(
+                    format!("xsp{n}"),
+                    ("thetaC", rs),
+                    (&p, rp),
+                    k1 * a.stiffness_ratio_sun_planet,
+                    shape,
+                    fr.f3,
+                    damp,
+                    b,
+                )
+                .with_term("thetac", -rc)
+                .with_error(planetary * b_ref, fr.f3, ph)
+                .with_phase(ph),
             );
         }
         for n in 1..=np {
             let p = format!("thetap{n}");
             elements.push(
-                Element::mesh(format!("xrp{n}"), (&p, rp), ("thetac", rc), k1 * a.stiffness_ratio_ring_planet, shape, fr.f3, damp, b)
-                    .with_error(planetary * b_ref, fr.f3, ph)
-                    .with_phase(ph),
+                Element::mesh(
+                    format!("xrp{n}"),
+                    (&p, rp),
+                    ("thetac", rc),
+                    k1 * a.stiffness_ratio_ring_planet,
+                    shape,
+                    fr.f3,
+                    damp,
+                    b,
+                )
+                .with_error(planetary * b_ref, fr.f3, ph)
+                .with_phase(ph),
             );
         }
         // Static load: input torque from the dimensionless stage-1 force F̄1 = F1/(k1 b_ref),
         // output torque balancing it (constant mean speed).
         let t_in = a.static_load * k1 * b_ref * r1;
         let loads = vec![
-            Load { dof: "theta1".into(), schedule: LoadSchedule::Constant { value: t_in } },
-            Load { dof: "thetac".into(), schedule: LoadSchedule::Balancing },
+            Load {
+                dof: "theta1".into(),
+                schedule: LoadSchedule::Constant { value: t_in },
+            },
+            Load {
+                dof: "thetac".into(),
+                schedule: LoadSchedule::Balancing,
+            },
         ];
-        let asm = Assembly { name: self.name.clone(), dofs, elements, loads, length_ref: b_ref };
+        let asm = Assembly {
+            name: self.name.clone(),
+            dofs,
+            elements,
+            loads,
+            length_ref: b_ref,
+        };
         asm.validate()?;
         Ok(asm)
     }

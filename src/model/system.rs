@@ -127,7 +127,9 @@ impl DimensionlessModel {
     pub fn natural_frequencies(&self) -> Vec<f64> {
         let n = self.n();
         // Ā diag(k̄) is similar to the symmetric diag(√k̄) Ā diag(√k̄).
-        let s = DMatrix::from_fn(n, n, |i, j| self.k_ratio[i].sqrt() * self.a[(i, j)] * self.k_ratio[j].sqrt());
+        let s = DMatrix::from_fn(n, n, |i, j| {
+            self.k_ratio[i].sqrt() * self.a[(i, j)] * self.k_ratio[j].sqrt()
+        });
         let mut w: Vec<f64> = s
             .symmetric_eigen()
             .eigenvalues
@@ -217,12 +219,19 @@ impl GearOde {
     /// Prepare the right-hand side for `Ω1 > 0`.
     pub fn new(m: &DimensionlessModel, omega1: f64) -> Result<Self> {
         if !(omega1.is_finite() && omega1 > 0.0) {
-            return Err(Error::param("Ω1", omega1, "the operating frequency must be positive"));
+            return Err(Error::param(
+                "Ω1",
+                omega1,
+                "the operating frequency must be positive",
+            ));
         }
         let n = m.n();
         let mut freqs: Vec<f64> = Vec::new();
         let mut freq_index = |w: f64| -> usize {
-            if let Some(i) = freqs.iter().position(|&f| (f - w).abs() <= 1e-12 * w.abs().max(1.0)) {
+            if let Some(i) = freqs
+                .iter()
+                .position(|&f| (f - w).abs() <= 1e-12 * w.abs().max(1.0))
+            {
                 i
             } else {
                 freqs.push(w);
@@ -244,7 +253,9 @@ impl GearOde {
                     // Normalise to mean 1 numerically (the tanh edges shift the mean slightly).
                     let np = 4096;
                     let mean = (0..np)
-                        .map(|i| square_wave(i as f64 / np as f64, d, double_to_single, smoothing, 1.0))
+                        .map(|i| {
+                            square_wave(i as f64 / np as f64, d, double_to_single, smoothing, 1.0)
+                        })
                         .sum::<f64>()
                         / np as f64;
                     ShapeRt::Square(d, double_to_single, smoothing, mean)
@@ -385,7 +396,11 @@ impl OdeSystem for GearOde {
             for j in 0..n {
                 acc += row[j] * fk[j];
             }
-            let f = if loads_static { self.f0[i] } else { self.static_load(t, i) };
+            let f = if loads_static {
+                self.f0[i]
+            } else {
+                self.static_load(t, i)
+            };
             dy[i] = y[n + i];
             dy[n + i] = f - acc;
         }

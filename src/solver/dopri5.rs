@@ -117,7 +117,11 @@ impl<'a, S: OdeSystem + ?Sized> Dopri5<'a, S> {
             )));
         }
         if !(opts.rtol > 0.0 && opts.atol > 0.0) {
-            return Err(Error::param("rtol/atol", opts.rtol.min(opts.atol), "tolerances must be positive"));
+            return Err(Error::param(
+                "rtol/atol",
+                opts.rtol.min(opts.atol),
+                "tolerances must be positive",
+            ));
         }
         if y0.iter().any(|v| !v.is_finite()) {
             return Err(Error::NonFinite { t: t0 });
@@ -152,7 +156,11 @@ impl<'a, S: OdeSystem + ?Sized> Dopri5<'a, S> {
         if ns > 0 {
             sys.switches(t0, &me.y, &mut me.g_old);
         }
-        me.h = if opts.h_init > 0.0 { opts.h_init } else { me.initial_step() };
+        me.h = if opts.h_init > 0.0 {
+            opts.h_init
+        } else {
+            me.initial_step()
+        };
         // Dense output of the (empty) last step: constant.
         me.rcont[0].copy_from_slice(y0);
         Ok(me)
@@ -169,7 +177,11 @@ impl<'a, S: OdeSystem + ?Sized> Dopri5<'a, S> {
             d1 += (self.k[0][i] / s).powi(2);
         }
         let (d0, d1) = ((d0 / n as f64).sqrt(), (d1 / n as f64).sqrt());
-        let mut h0 = if d0 < 1e-5 || d1 < 1e-5 { 1e-6 } else { 0.01 * d0 / d1 };
+        let mut h0 = if d0 < 1e-5 || d1 < 1e-5 {
+            1e-6
+        } else {
+            0.01 * d0 / d1
+        };
         if self.opts.h_max > 0.0 {
             h0 = h0.min(self.opts.h_max);
         }
@@ -219,18 +231,21 @@ impl<'a, S: OdeSystem + ?Sized> Dopri5<'a, S> {
         }
         sys.rhs(t + C5 * h, yt, k5);
         for i in 0..n {
-            yt[i] = y[i] + h * (A61 * k1[i] + A62 * k2[i] + A63 * k3[i] + A64 * k4[i] + A65 * k5[i]);
+            yt[i] =
+                y[i] + h * (A61 * k1[i] + A62 * k2[i] + A63 * k3[i] + A64 * k4[i] + A65 * k5[i]);
         }
         sys.rhs(t + h, yt, k6);
         let yn = &mut self.ynew;
         for i in 0..n {
-            yn[i] = y[i] + h * (A71 * k1[i] + A73 * k3[i] + A74 * k4[i] + A75 * k5[i] + A76 * k6[i]);
+            yn[i] =
+                y[i] + h * (A71 * k1[i] + A73 * k3[i] + A74 * k4[i] + A75 * k5[i] + A76 * k6[i]);
         }
         sys.rhs(t + h, yn, k7);
         self.stats.rhs_evals += 6;
         let mut err = 0.0;
         for i in 0..n {
-            let e = h * (E1 * k1[i] + E3 * k3[i] + E4 * k4[i] + E5 * k5[i] + E6 * k6[i] + E7 * k7[i]);
+            let e =
+                h * (E1 * k1[i] + E3 * k3[i] + E4 * k4[i] + E5 * k5[i] + E6 * k6[i] + E7 * k7[i]);
             let sk = self.opts.atol + self.opts.rtol * y[i].abs().max(yn[i].abs());
             err += (e / sk) * (e / sk);
         }
@@ -249,7 +264,8 @@ impl<'a, S: OdeSystem + ?Sized> Dopri5<'a, S> {
             r1[i] = ydiff;
             r2[i] = bspl;
             r3[i] = ydiff - h * k7[i] - bspl;
-            r4[i] = h * (D1 * k1[i] + D3 * k3[i] + D4 * k4[i] + D5 * k5[i] + D6 * k6[i] + D7 * k7[i]);
+            r4[i] =
+                h * (D1 * k1[i] + D3 * k3[i] + D4 * k4[i] + D5 * k5[i] + D6 * k6[i] + D7 * k7[i]);
         }
     }
 
@@ -283,7 +299,9 @@ impl<'a, S: OdeSystem + ?Sized> Dopri5<'a, S> {
             } else {
                 None
             };
-            let Some((mut a, mut ga, mut b, mut gb)) = bracket else { continue };
+            let Some((mut a, mut ga, mut b, mut gb)) = bracket else {
+                continue;
+            };
             if let Some(bst) = best {
                 if a >= bst {
                     continue;
@@ -293,7 +311,11 @@ impl<'a, S: OdeSystem + ?Sized> Dopri5<'a, S> {
             let mut side = 0i8;
             for _ in 0..60 {
                 let c = (a * gb - b * ga) / (gb - ga);
-                let c = if c.is_finite() && c > a && c < b { c } else { 0.5 * (a + b) };
+                let c = if c.is_finite() && c > a && c < b {
+                    c
+                } else {
+                    0.5 * (a + b)
+                };
                 self.dense_theta(c, &mut y_mid);
                 sys.switches(self.t + c * h, &y_mid, &mut g);
                 let gc = g[i];
@@ -428,7 +450,10 @@ impl<S: OdeSystem + ?Sized> Integrator for Dopri5<'_, S> {
             if forced_h.is_none() || h_next > self.h {
                 self.h = h_next;
             }
-            if lands && self.next_break < self.breaks.len() && self.t >= self.breaks[self.next_break] {
+            if lands
+                && self.next_break < self.breaks.len()
+                && self.t >= self.breaks[self.next_break]
+            {
                 self.t = self.breaks[self.next_break];
                 self.next_break += 1;
                 // The right-hand side jumps here: the FSAL derivative is stale.

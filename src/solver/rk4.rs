@@ -25,7 +25,10 @@ impl<'a, S: OdeSystem + ?Sized> Rk4<'a, S> {
     pub fn new(sys: &'a S, t0: f64, y0: &[f64], h: f64) -> Result<Self> {
         let n = sys.dim();
         if y0.len() != n {
-            return Err(Error::InvalidConfig(format!("initial state has {} components, the system {n}", y0.len())));
+            return Err(Error::InvalidConfig(format!(
+                "initial state has {} components, the system {n}",
+                y0.len()
+            )));
         }
         if !(h.is_finite() && h > 0.0) {
             return Err(Error::param("h", h, "the RK4 step must be positive"));
@@ -43,7 +46,10 @@ impl<'a, S: OdeSystem + ?Sized> Rk4<'a, S> {
             f,
             k: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
             tmp: vec![0.0; n],
-            stats: Stats { rhs_evals: 1, ..Stats::default() },
+            stats: Stats {
+                rhs_evals: 1,
+                ..Stats::default()
+            },
         })
     }
 }
@@ -111,7 +117,10 @@ impl<S: OdeSystem + ?Sized> Integrator for Rk4<'_, S> {
             s * s * (s - 1.0),
         );
         for i in 0..out.len() {
-            out[i] = h00 * self.y_prev[i] + h10 * h * self.f_prev[i] + h01 * self.y[i] + h11 * h * self.f[i];
+            out[i] = h00 * self.y_prev[i]
+                + h10 * h * self.f_prev[i]
+                + h01 * self.y[i]
+                + h11 * h * self.f[i];
         }
     }
 }
