@@ -78,6 +78,10 @@ pub struct SolveArgs {
     /// Absolute tolerance of the adaptive solver.
     #[arg(long, default_value_t = Dopri5Options::default().atol)]
     pub atol: f64,
+    /// Skip the largest-Lyapunov-exponent estimate (a twin trajectory; halves the cost, the
+    /// motion state then comes from the Poincaré geometry alone).
+    #[arg(long)]
+    pub no_lyapunov: bool,
 }
 
 impl SolveArgs {
@@ -96,6 +100,7 @@ impl SolveArgs {
                 atol: self.atol,
                 ..Default::default()
             },
+            lyapunov: !self.no_lyapunov,
         }
     }
 }

@@ -7,7 +7,7 @@
 
 use serde::Serialize;
 
-use super::motion::{ClassifyOptions, MotionState, classify};
+use super::motion::{ClassifyOptions, MotionState, classify, classify_forced};
 use super::simulate::{RunSpec, observe};
 use crate::error::Result;
 use crate::model::DimensionlessModel;
@@ -24,6 +24,8 @@ pub struct BifurcationPoint {
     pub range: Vec<(f64, f64)>,
     /// Motion state of the first tracked element.
     pub state: MotionState,
+    /// Largest Lyapunov exponent per stage-1 mesh period, when computed.
+    pub lyapunov_per_period: Option<f64>,
     pub stats: Stats,
 }
 
@@ -55,7 +57,7 @@ pub fn point(
     let mut poincare = vec![Vec::with_capacity(spec.periods); elements.len()];
     let mut range = vec![(f64::INFINITY, f64::NEG_INFINITY); elements.len()];
     let mut v_range = (f64::INFINITY, f64::NEG_INFINITY);
-    let stats = observe(&sys, Some(model), spec, |k, _, y| {
+    let obs = observe(&sys, Some(model), spec, |k, _, y| {
         for (e, &j) in elements.iter().enumerate() {
             let x = y[j];
             range[e].0 = range[e].0.min(x);
@@ -71,13 +73,27 @@ pub fn point(
         (range[0].1 - range[0].0).max(1e-12),
         (v_range.1 - v_range.0).max(1e-12),
     );
-    let state = classify(&poincare[0], scale, &ClassifyOptions::default())?.state;
+    let opts = ClassifyOptions::default();
+    let state = match obs.lyapunov_per_period {
+        Some(l) => {
+            classify_forced(
+                &poincare[0],
+                scale,
+                l,
+                &model.other_frequency_ratios(),
+                &opts,
+            )?
+            .state
+        }
+        None => classify(&poincare[0], scale, &opts)?.state,
+    };
     Ok(BifurcationPoint {
         omega1: spec.omega1,
         poincare,
         range,
         state,
-        stats,
+        lyapunov_per_period: obs.lyapunov_per_period,
+        stats: obs.stats,
     })
 }
 
@@ -111,7 +127,7 @@ impl Bifurcation {
     /// CSV with one row per Poincaré sample:
     /// `omega1,state,<el>,<el>_velocity,…` for the tracked elements.
     pub fn to_csv(&self) -> String {
-        let mut s = String::from("omega1,state");
+        let mut s = String::from("omega1,state,lyapunov_per_period");
         for e in &self.elements {
             s.push_str(&format!(",{e},{e}_velocity"));
         }
@@ -119,7 +135,11 @@ impl Bifurcation {
         for p in &self.points {
             let m = p.poincare.iter().map(|v| v.len()).min().unwrap_or(0);
             for k in 0..m {
-                s.push_str(&format!("{},{}", p.omega1, p.state.label()));
+                let l = p
+                    .lyapunov_per_period
+                    .map(|l| format!("{l:.5}"))
+                    .unwrap_or_default();
+                s.push_str(&format!("{},{},{l}", p.omega1, p.state.label()));
                 for e in &p.poincare {
                     s.push_str(&format!(",{:.9},{:.9}", e[k].0, e[k].1));
                 }

@@ -302,10 +302,8 @@ impl<'a, S: OdeSystem + ?Sized> Dopri5<'a, S> {
             let Some((mut a, mut ga, mut b, mut gb)) = bracket else {
                 continue;
             };
-            if let Some(bst) = best {
-                if a >= bst {
-                    continue;
-                }
+            if best.is_some_and(|bst| a >= bst) {
+                continue;
             }
             // Illinois method on θ.
             let mut side = 0i8;
