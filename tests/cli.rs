@@ -3,7 +3,10 @@
 use std::process::Command;
 
 fn gearwear(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_gearwear")).args(args).output().expect("binary runs");
+    let out = Command::new(env!("CARGO_BIN_EXE_gearwear"))
+        .args(args)
+        .output()
+        .expect("binary runs");
     (
         out.status.success(),
         String::from_utf8_lossy(&out.stdout).into_owned(),
@@ -34,14 +37,22 @@ fn simulate_prints_lines_and_motion_state_and_writes_plots() {
     assert!(ok, "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     for k in ["f1", "f2", "2f2", "f3", "f1/2", "f1-f2"] {
-        let a = v["lines"][k].as_f64().unwrap_or_else(|| panic!("line {k} missing"));
+        let a = v["lines"][k]
+            .as_f64()
+            .unwrap_or_else(|| panic!("line {k} missing"));
         assert!(a.is_finite() && a >= 0.0);
     }
     assert!(v["lines"]["f1"].as_f64().unwrap() > v["lines"]["f3"].as_f64().unwrap());
     let state = v["motion_state"].as_str().unwrap();
     assert!(state.starts_with("period-") || state == "quasi-periodic" || state == "chaotic");
     assert!((v["f1_hz"].as_f64().unwrap() - 870.0).abs() < 1e-6);
-    for f in ["time.png", "phase.png", "poincare.png", "spectrum.png", "overview.png"] {
+    for f in [
+        "time.png",
+        "phase.png",
+        "poincare.png",
+        "spectrum.png",
+        "overview.png",
+    ] {
         let bytes = std::fs::read(dir.join(f)).unwrap();
         assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
     }
@@ -60,17 +71,52 @@ fn model_export_is_complete_and_consistent() {
         assert_eq!(row.len(), 10);
         for (j, x) in row.iter().enumerate() {
             let y = a[j][i].as_f64().unwrap();
-            assert!((x.as_f64().unwrap() - y).abs() < 1e-12, "A not symmetric at {i},{j}");
+            assert!(
+                (x.as_f64().unwrap() - y).abs() < 1e-12,
+                "A not symmetric at {i},{j}"
+            );
         }
     }
     assert!((a[0][0].as_f64().unwrap() - 1.0).abs() < 1e-12);
-    for k in ["k_ratio", "eps", "c", "F", "omega_ratio", "phase", "backlash", "error_amplitude"] {
-        assert_eq!(v[k].as_array().unwrap_or_else(|| panic!("{k} missing")).len(), 10, "{k}");
+    for k in [
+        "k_ratio",
+        "eps",
+        "c",
+        "F",
+        "omega_ratio",
+        "phase",
+        "backlash",
+        "error_amplitude",
+    ] {
+        assert_eq!(
+            v[k].as_array()
+                .unwrap_or_else(|| panic!("{k} missing"))
+                .len(),
+            10,
+            "{k}"
+        );
     }
-    let order: Vec<&str> = v["order"].as_array().unwrap().iter().map(|s| s.as_str().unwrap()).collect();
-    assert_eq!(order, ["x1", "x2", "xsp1", "xsp2", "xsp3", "xsp4", "xrp1", "xrp2", "xrp3", "xrp4"]);
-    let w: Vec<f64> = v["omega_ratio"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
-    assert!((w[0] - 1.0).abs() < 1e-12 && (w[1] - 0.36).abs() < 1e-12 && (w[9] - 0.0875).abs() < 1e-12);
+    let order: Vec<&str> = v["order"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s.as_str().unwrap())
+        .collect();
+    assert_eq!(
+        order,
+        [
+            "x1", "x2", "xsp1", "xsp2", "xsp3", "xsp4", "xrp1", "xrp2", "xrp3", "xrp4"
+        ]
+    );
+    let w: Vec<f64> = v["omega_ratio"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    assert!(
+        (w[0] - 1.0).abs() < 1e-12 && (w[1] - 0.36).abs() < 1e-12 && (w[9] - 0.0875).abs() < 1e-12
+    );
 }
 
 #[test]
@@ -104,7 +150,10 @@ fn bifurcation_writes_csv_and_plots() {
     assert!(ok, "{err}");
     let text = std::fs::read_to_string(&csv).unwrap();
     let mut lines = text.lines();
-    assert_eq!(lines.next().unwrap(), "omega1,state,lyapunov_per_period,x1,x1_velocity,xrp1,xrp1_velocity");
+    assert_eq!(
+        lines.next().unwrap(),
+        "omega1,state,lyapunov_per_period,x1,x1_velocity,xrp1,xrp1_velocity"
+    );
     assert_eq!(lines.count(), 5 * 20);
     assert!(png.exists() && dir.join("b_xrp1.png").exists());
     std::fs::remove_dir_all(dir).ok();
@@ -118,7 +167,15 @@ fn bad_arguments_get_clear_errors() {
     assert!(!ok && err.contains("Ω1"), "{err}");
     let (ok, _, err) = gearwear(&["simulate", "--omega1", "1", "--ea", "NaN"]);
     assert!(!ok && err.contains("--ea"), "{err}");
-    let (ok, _, err) = gearwear(&["simulate", "--omega1", "1", "--ea", "0.5", "--element", "x99"]);
+    let (ok, _, err) = gearwear(&[
+        "simulate",
+        "--omega1",
+        "1",
+        "--ea",
+        "0.5",
+        "--element",
+        "x99",
+    ]);
     assert!(!ok && err.contains("x99"), "{err}");
     let (ok, _, err) = gearwear(&["model", "--config", "/nonexistent/rig.toml"]);
     assert!(!ok && err.contains("/nonexistent/rig.toml"), "{err}");

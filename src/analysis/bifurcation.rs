@@ -42,7 +42,10 @@ pub fn grid(start: f64, end: f64, step: f64) -> Vec<f64> {
         return vec![start];
     }
     let n = ((end - start) / step + 1e-9).floor() as usize;
-    (0..=n).map(|i| start + i as f64 * step).collect()
+    // Rounded to 1e-9 so that 0.1 + 2·0.05 prints as 0.2, not 0.20000000000000004.
+    (0..=n)
+        .map(|i| ((start + i as f64 * step) * 1e9).round() / 1e9)
+        .collect()
 }
 
 /// Run one grid point.
@@ -145,6 +148,39 @@ impl Bifurcation {
                 }
                 s.push('\n');
             }
+        }
+        s
+    }
+
+    /// CSV with one row per grid point: the motion state, the Lyapunov exponent, and per
+    /// tracked element the range of `x̄` over the retained samples and the extent of its
+    /// Poincaré set (`max − min` of the Poincaré displacements).
+    pub fn summary_csv(&self) -> String {
+        let mut s = String::from("omega1,state,lyapunov_per_period");
+        for e in &self.elements {
+            s.push_str(&format!(",{e}_min,{e}_max,{e}_poincare_extent"));
+        }
+        s.push('\n');
+        for p in &self.points {
+            let l = p
+                .lyapunov_per_period
+                .map(|l| format!("{l:.5}"))
+                .unwrap_or_default();
+            s.push_str(&format!("{},{},{l}", p.omega1, p.state.label()));
+            for (e, pts) in p.poincare.iter().enumerate() {
+                let (lo, hi) = pts
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), q| {
+                        (a.min(q.0), b.max(q.0))
+                    });
+                s.push_str(&format!(
+                    ",{:.6},{:.6},{:.6}",
+                    p.range[e].0,
+                    p.range[e].1,
+                    hi - lo
+                ));
+            }
+            s.push('\n');
         }
         s
     }
