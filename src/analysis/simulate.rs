@@ -231,48 +231,21 @@ pub fn observe<S: OdeSystem>(
     let mut integ = Dopri5::new(sys, 0.0, &y0, spec.solver)?;
     advance_to(&mut integ, t0)?;
     let mut finite = true;
-    let mut twin: Option<Dopri5<'_, S>> = None;
-    let mut log_growth = 0.0;
-    let mut renormalisations = 0usize;
+    let mut twin = if spec.lyapunov {
+        Some(Twin::start(sys, t0, integ.y(), spec.solver)?)
+    } else {
+        None
+    };
     let mut twin_err: Option<Error> = None;
-    if spec.lyapunov {
-        let mut y = integ.y().to_vec();
-        let norm = (dim as f64).sqrt();
-        y.iter_mut().for_each(|v| *v += TWIN_SEPARATION / norm);
-        twin = Some(Dopri5::new(sys, t0, &y, spec.solver)?);
-    }
-    let mut twin_state = vec![0.0; dim];
     sample_uniform(&mut integ, t0, dt, t_end, |k, t, y| {
         finite &= y.iter().all(|v| v.is_finite());
         if k > 0
             && k % spp == 0
             && twin_err.is_none()
             && let Some(tw) = twin.as_mut()
+            && let Err(e) = tw.renormalise(t, y)
         {
-            {
-                if let Err(e) = advance_to(tw, t) {
-                    twin_err = Some(e);
-                } else {
-                    twin_state.copy_from_slice(tw.y());
-                    let d = twin_state
-                        .iter()
-                        .zip(y)
-                        .map(|(a, b)| (a - b) * (a - b))
-                        .sum::<f64>()
-                        .sqrt();
-                    if d > 0.0 && d.is_finite() {
-                        log_growth += (d / TWIN_SEPARATION).ln();
-                        renormalisations += 1;
-                        for (ts, yy) in twin_state.iter_mut().zip(y) {
-                            *ts = yy + (*ts - yy) * TWIN_SEPARATION / d;
-                        }
-                    }
-                    match Dopri5::new(sys, t, &twin_state, spec.solver) {
-                        Ok(n) => *tw = n,
-                        Err(e) => twin_err = Some(e),
-                    }
-                }
-            }
+            twin_err = Some(e);
         }
         on_sample(k, t, y);
     })?;
@@ -284,6 +257,57 @@ pub fn observe<S: OdeSystem>(
     }
     Ok(Observed {
         stats: integ.stats(),
-        lyapunov_per_period: (renormalisations > 0).then(|| log_growth / renormalisations as f64),
+        lyapunov_per_period: twin.and_then(|tw| tw.exponent_per_renormalisation()),
     })
+}
+
+/// The twin trajectory of Benettin's method.
+struct Twin<'a, S: OdeSystem> {
+    sys: &'a S,
+    opts: Dopri5Options,
+    integ: Dopri5<'a, S>,
+    log_growth: f64,
+    count: usize,
+}
+
+impl<'a, S: OdeSystem> Twin<'a, S> {
+    /// Start `TWIN_SEPARATION` away from `y` (along the diagonal direction).
+    fn start(sys: &'a S, t: f64, y: &[f64], opts: Dopri5Options) -> Result<Self> {
+        let step = TWIN_SEPARATION / (y.len() as f64).sqrt();
+        let y2: Vec<f64> = y.iter().map(|v| v + step).collect();
+        Ok(Twin {
+            sys,
+            opts,
+            integ: Dopri5::new(sys, t, &y2, opts)?,
+            log_growth: 0.0,
+            count: 0,
+        })
+    }
+
+    /// Advance to `t`, record the growth of the separation from `y` and pull the twin back to
+    /// `TWIN_SEPARATION` along the same direction.
+    fn renormalise(&mut self, t: f64, y: &[f64]) -> Result<()> {
+        advance_to(&mut self.integ, t)?;
+        let mut z = self.integ.y().to_vec();
+        let d = z
+            .iter()
+            .zip(y)
+            .map(|(a, b)| (a - b) * (a - b))
+            .sum::<f64>()
+            .sqrt();
+        if d > 0.0 && d.is_finite() {
+            self.log_growth += (d / TWIN_SEPARATION).ln();
+            self.count += 1;
+            for (zi, yi) in z.iter_mut().zip(y) {
+                *zi = yi + (*zi - yi) * TWIN_SEPARATION / d;
+            }
+        }
+        self.integ = Dopri5::new(self.sys, t, &z, self.opts)?;
+        Ok(())
+    }
+
+    /// Mean log growth per renormalisation interval.
+    fn exponent_per_renormalisation(&self) -> Option<f64> {
+        (self.count > 0).then(|| self.log_growth / self.count as f64)
+    }
 }
