@@ -35,6 +35,8 @@ pub enum Command {
     Model(ModelArgs),
     /// Characteristic frequencies of the rig (the first seed's Table 2).
     Frequencies(FrequenciesArgs),
+    /// The second seed's 10-DOF space drive (Model B).
+    ModelB(crate::model_b_cli::ModelBArgs),
 }
 
 /// Options shared by the simulation commands.
@@ -232,6 +234,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Bifurcation(a) => bifurcation_cmd(a),
         Command::Model(a) => model_cmd(a),
         Command::Frequencies(a) => frequencies(a),
+        Command::ModelB(a) => crate::model_b_cli::run(a),
     }
 }
 
