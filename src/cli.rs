@@ -37,6 +37,8 @@ pub enum Command {
     Frequencies(FrequenciesArgs),
     /// Line amplitudes of x̄1 versus wear at one Ω1 (the first seed's Figure 17).
     WearLines(WearLinesArgs),
+    /// The second seed's 10-DOF space drive (Model B).
+    ModelB(crate::model_b_cli::ModelBArgs),
 }
 
 /// Options shared by the simulation commands.
@@ -266,6 +268,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Model(a) => model_cmd(a),
         Command::Frequencies(a) => frequencies(a),
         Command::WearLines(a) => wear_lines(a),
+        Command::ModelB(a) => crate::model_b_cli::run(a),
     }
 }
 

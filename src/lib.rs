@@ -24,6 +24,7 @@ pub mod analysis;
 pub mod cli;
 pub mod error;
 pub mod model;
+pub mod model_b_cli;
 pub mod plot;
 pub mod signal;
 pub mod solver;
