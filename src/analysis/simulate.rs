@@ -302,7 +302,12 @@ impl<'a, S: OdeSystem> Twin<'a, S> {
                 *zi = yi + (*zi - yi) * TWIN_SEPARATION / d;
             }
         }
-        self.integ = Dopri5::new(self.sys, t, &z, self.opts)?;
+        // Restart from the pulled-back state, keeping the step size the controller had reached.
+        let opts = Dopri5Options {
+            h_init: self.integ.proposed_step(),
+            ..self.opts
+        };
+        self.integ = Dopri5::new(self.sys, t, &z, opts)?;
         Ok(())
     }
 
