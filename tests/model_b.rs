@@ -4,11 +4,16 @@
 //! tooth counts, and the return-difference formula against a simulated reversal.
 
 use gearwear::analysis::model_b::{
-    Prepared, SimSpec, SolverKind, SolverSettings, load_drop, return_difference_formula,
+    Prepared, SimSpec, SolverKind, SolverSettings, load_drop_comparison, return_difference_formula,
     shock_times, simulate, simulate_reversal,
 };
-use gearwear::model::{ModelBConfig, ModelBOptions, StiffnessForm};
-use gearwear::solver::{Integrator, OdeSystem, Rodas4, Rodas4Options, advance_to};
+use gearwear::model::{
+    Assembly, Damping, Dof, Element, Load, LoadSchedule, ModelBConfig, ModelBOptions,
+    StiffnessForm, StiffnessShape,
+};
+use gearwear::solver::{
+    Dopri5, Dopri5Options, Integrator, OdeSystem, Rodas4, Rodas4Options, advance_to, sample_uniform,
+};
 
 /// y' = A y with A = V diag(λ1, λ2) V⁻¹, V = [[1, 1], [1, −1]].
 struct Linear2 {
@@ -262,50 +267,282 @@ fn return_difference_formula_matches_a_simulated_reversal_and_a_wrong_ratio_does
 }
 
 #[test]
-fn load_drop_differs_with_and_without_return_difference() {
-    // Measured behaviour of this model (docs/model-b.md): with backlash the first swing is the
-    // same and the drive comes to rest off-centre inside the clearance, but it settles
-    // sooner and with fewer oscillations, because the mesh's viscous term keeps acting inside
-    // the clearance (the paper's equations) and damps the light pinion side within ~1 ms.
-    // The paper reports a slower decay with return difference; this model does not.
+fn load_drop_reproduces_the_paper_only_with_contact_damping() {
+    // The paper: after the load drops, with return difference the response decays slowly,
+    // with several oscillations larger than without. docs/model-b.md has the measured numbers.
     let cfg = ModelBConfig::default_rig();
-    let rep = load_drop(
-        &cfg,
-        StiffnessForm::SquareWave,
-        0.05,
-        1.0,
-        5000.0,
-        &SolverSettings::default(),
-    )
-    .unwrap();
-    let (w, wo) = (
-        rep.with_return_difference.measures,
-        rep.without_return_difference.measures,
-    );
-    assert!(!w.still_oscillating && !wo.still_oscillating);
-    assert!(w.first_peak_arcmin > 0.5 && wo.first_peak_arcmin > 0.5);
-    // The first swing is the same (the stored wind-up energy is the same); the paper reports
-    // larger oscillations with return difference, this model does not.
-    assert!(
-        (0.9..1.1).contains(&rep.first_peak_ratio),
-        "peak ratio {}",
-        rep.first_peak_ratio
-    );
-    // Comes to rest inside the clearance, not at zero.
+    // The CLI's tolerance (rtol 1e-8): the contact-only runs with impacts need it.
+    let solver = SolverSettings {
+        rtol: 1e-8,
+        atol: 1e-10,
+        ..Default::default()
+    };
+    let rep =
+        load_drop_comparison(&cfg, StiffnessForm::SquareWave, 0.05, 1.0, 5000.0, &solver).unwrap();
     let half_rd = 0.5
         * (return_difference_formula(&cfg, 0.0, true).total
             - return_difference_formula(&cfg, 0.0, false).total);
-    assert!(w.final_dte_arcmin.abs() > 0.05 && w.final_dte_arcmin.abs() <= half_rd + 1e-6);
-    assert!(wo.final_dte_arcmin.abs() < 1e-3);
-    // Settles sooner with fewer oscillations here (opposite to the paper's claim).
+    // With viscous damping the drive creeps to rest on a flank side of the clearance; with
+    // contact-only damping it rattles and may stop anywhere inside it (measured: 0.168 arcmin
+    // viscous, −0.032 arcmin contact-only, of a 0.346 arcmin half clearance).
+    let v = &rep.viscous.with_return_difference.measures;
     assert!(
-        rep.decay_time_ratio < 0.9,
+        v.final_dte_arcmin.abs() > 0.05,
+        "viscous final {}",
+        v.final_dte_arcmin
+    );
+    for r in [&rep.viscous, &rep.contact_only] {
+        let (w, wo) = (
+            r.with_return_difference.measures,
+            r.without_return_difference.measures,
+        );
+        assert!(!w.still_oscillating && !wo.still_oscillating);
+        assert!(w.first_peak_arcmin > 0.5 && wo.first_peak_arcmin > 0.5);
+        // Both come to rest inside the clearance with backlash, at zero without.
+        assert!(w.final_dte_arcmin.abs() <= half_rd + 1e-6);
+        assert!(wo.final_dte_arcmin.abs() < 1e-3);
+    }
+
+    // Contact-only damping (free flight in the clearance): the paper's result. Measured at
+    // rtol 1e-8: decay 0.838 s vs 0.262 s (ratio 3.20), 12 extrema larger than anything the
+    // drive without backlash still does from then on, first peak 2.49 vs 2.13 arcmin (1.17).
+    // At rtol 1e-7 / 1e-6 the decay ratio is 3.11 / 3.34 and the extrema 15 / 17, but the
+    // first-peak ratio is 0.96 / 1.03: only the slow decay with larger late oscillations is
+    // robust, so that is what is asserted, with the first swing merely not smaller.
+    let c = &rep.contact_only;
+    assert!(
+        c.decay_time_ratio > 2.5,
         "decay ratio {}",
-        rep.decay_time_ratio
+        c.decay_time_ratio
     );
     assert!(
-        rep.oscillation_ratio < 0.7,
+        c.larger_extrema_than_without >= 8,
+        "{} extrema larger than without",
+        c.larger_extrema_than_without
+    );
+    assert!(
+        c.first_peak_ratio > 0.9,
+        "peak ratio {}",
+        c.first_peak_ratio
+    );
+    // Fewer oscillations above 5 % of the first peak all the same (0.69): free flight through
+    // the gap lengthens the period as the amplitude falls.
+    assert!(
+        c.oscillation_ratio < 1.0,
         "oscillation ratio {}",
-        rep.oscillation_ratio
+        c.oscillation_ratio
+    );
+
+    // Damping also inside the clearance (the paper's equations as written): the opposite. The
+    // first swing is the same, and the drive settles sooner with fewer oscillations, because
+    // the mesh's viscous term damps the light pinion side within ~1 ms inside the gap.
+    let v = &rep.viscous;
+    assert!(
+        (0.9..1.1).contains(&v.first_peak_ratio),
+        "peak ratio {}",
+        v.first_peak_ratio
+    );
+    assert!(
+        v.decay_time_ratio < 0.9,
+        "decay ratio {}",
+        v.decay_time_ratio
+    );
+    assert!(
+        v.oscillation_ratio < 0.7,
+        "oscillation ratio {}",
+        v.oscillation_ratio
+    );
+    // Measured: 3 (the first swings, which match the no-backlash ones to 0.05 %).
+    assert!(
+        v.larger_extrema_than_without <= 4,
+        "{} extrema larger than without",
+        v.larger_extrema_than_without
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// Contact-only mesh damping against the piecewise closed form.
+// ---------------------------------------------------------------------------------------------
+
+/// `x'' + [|x| > b] (c x' + k f_b(x)) = F + a Ω² sin(Ω τ + φ)`: one mesh whose damping acts only
+/// in contact. Inside the clearance the motion is free flight `x'' = F + a Ω² sin(Ω τ + φ)`, in
+/// contact a damped linear oscillator about `±b + F/k`; both solved in closed form.
+#[derive(Clone, Copy)]
+struct ContactOnlyMesh {
+    c: f64,
+    k: f64,
+    b: f64,
+    f: f64,
+    a: f64,
+    w: f64,
+    phi: f64,
+}
+
+impl ContactOnlyMesh {
+    fn region(&self, x: f64) -> i32 {
+        if x > self.b {
+            1
+        } else if x < -self.b {
+            -1
+        } else {
+            0
+        }
+    }
+
+    /// (x, v) at τ0 + u from (x0, v0) at τ0, staying in region `s`.
+    fn solve(&self, s: i32, tau0: f64, x0: f64, v0: f64, u: f64) -> (f64, f64) {
+        let (c, k, w, amp) = (self.c, self.k, self.w, self.a * self.w * self.w);
+        let th0 = w * tau0 + self.phi;
+        let th = th0 + w * u;
+        if s == 0 {
+            // Free flight: x = x0 + (v0 + (amp/w) cos θ0) u + F u²/2 − (amp/w²)(sin θ − sin θ0).
+            let v_shift = v0 + amp / w * th0.cos();
+            (
+                x0 + v_shift * u + 0.5 * self.f * u * u - amp / (w * w) * (th.sin() - th0.sin()),
+                v_shift + self.f * u - amp / w * th.cos(),
+            )
+        } else {
+            let xs = s as f64 * self.b + self.f / k;
+            let d = (k - w * w).powi(2) + (c * w).powi(2);
+            let p = amp * (k - w * w) / d;
+            let q = -amp * c * w / d;
+            let xp0 = xs + p * th0.sin() + q * th0.cos();
+            let vp0 = w * (p * th0.cos() - q * th0.sin());
+            let wd = (k - c * c / 4.0).sqrt();
+            let c1 = x0 - xp0;
+            let c2 = (v0 - vp0 + c / 2.0 * c1) / wd;
+            let e = (-c / 2.0 * u).exp();
+            let (sn, cs) = (wd * u).sin_cos();
+            (
+                xs + p * th.sin() + q * th.cos() + e * (c1 * cs + c2 * sn),
+                w * (p * th.cos() - q * th.sin())
+                    + e * (-c / 2.0 * (c1 * cs + c2 * sn) + wd * (-c1 * sn + c2 * cs)),
+            )
+        }
+    }
+
+    /// Reference on a grid: march region by region, each switch located by bisection to 1e-14.
+    fn reference(&self, grid: &[f64]) -> (Vec<f64>, usize) {
+        let (mut tau0, mut x, mut v, mut s) = (0.0, 0.0, 0.0, 0);
+        let (mut out, mut gi, mut switches) = (Vec::with_capacity(grid.len()), 0, 0);
+        let t_last = *grid.last().unwrap();
+        let du = 1e-3;
+        loop {
+            let hit = |u: f64| self.region(self.solve(s, tau0, x, v, u).0) != s;
+            let mut u = 0.0;
+            let mut switch = None;
+            while tau0 + u < t_last + du {
+                if hit(u + du) {
+                    let (mut lo, mut hi) = (u, u + du);
+                    while hi - lo > 1e-14 {
+                        let mid = 0.5 * (lo + hi);
+                        if hit(mid) { hi = mid } else { lo = mid }
+                    }
+                    switch = Some(hi);
+                    break;
+                }
+                u += du;
+            }
+            let end = switch.map_or(f64::INFINITY, |u| tau0 + u);
+            while gi < grid.len() && grid[gi] <= end {
+                out.push(self.solve(s, tau0, x, v, grid[gi] - tau0).0);
+                gi += 1;
+            }
+            if gi == grid.len() {
+                return (out, switches);
+            }
+            let u = switch.unwrap();
+            (x, v) = self.solve(s, tau0, x, v, u);
+            tau0 += u;
+            switches += 1;
+            s = self.region(x + 1e-9 * v.signum());
+        }
+    }
+
+    /// The same mesh through the generic assembly (J = 1, r = 1 m, k = 1: ω_h = 1).
+    fn assembly(&self, contact_only: bool) -> Assembly {
+        let el = Element::mesh(
+            "x",
+            ("q", 1.0),
+            ("q", 0.0),
+            self.k,
+            StiffnessShape::Constant,
+            1.0,
+            Damping::Coefficient(self.c),
+            self.b,
+        )
+        .with_error(self.a, 1.0, self.phi)
+        .with_contact_only_damping(contact_only);
+        Assembly {
+            name: "one-mesh-contact-damping".into(),
+            dofs: vec![Dof::rotation("q", 1.0).unwrap()],
+            elements: vec![el],
+            loads: vec![Load {
+                dof: "q".into(),
+                schedule: LoadSchedule::Constant { value: self.f },
+            }],
+            length_ref: 1.0,
+        }
+    }
+}
+
+#[test]
+fn contact_only_damping_matches_the_piecewise_closed_form() {
+    // Impacting regime: the forcing drives the mesh through the clearance both ways.
+    let p = ContactOnlyMesh {
+        c: 0.1,
+        k: 1.0,
+        b: 1.0,
+        f: 0.1,
+        a: 0.8,
+        w: 0.9,
+        phi: 0.3,
+    };
+    let grid: Vec<f64> = (0..=3000).map(|i| i as f64 * 0.02).collect();
+    let (reference, switches) = p.reference(&grid);
+    assert!(switches >= 20, "reference crosses only {switches} times");
+    let run = |contact_only: bool, rodas: bool| -> f64 {
+        let model = p.assembly(contact_only).resolve().unwrap();
+        assert_eq!(model.damping_in_contact_only, vec![contact_only]);
+        let sys = model.system(p.w).unwrap();
+        let mut err = 0.0_f64;
+        let mut on_sample =
+            |k: usize, _: f64, y: &[f64]| err = err.max((y[0] - reference[k]).abs());
+        if rodas {
+            let opts = Rodas4Options {
+                rtol: 1e-10,
+                atol: 1e-12,
+                ..Default::default()
+            };
+            let mut integ = Rodas4::new(&sys, 0.0, &[0.0, 0.0], opts).unwrap();
+            sample_uniform(&mut integ, 0.0, 0.02, 60.0, &mut on_sample).unwrap();
+        } else {
+            let opts = Dopri5Options {
+                rtol: 1e-10,
+                atol: 1e-12,
+                ..Default::default()
+            };
+            let mut integ = Dopri5::new(&sys, 0.0, &[0.0, 0.0], opts).unwrap();
+            sample_uniform(&mut integ, 0.0, 0.02, 60.0, &mut on_sample).unwrap();
+        }
+        err
+    };
+    let (e_dopri, e_rodas) = (run(true, false), run(true, true));
+    // Measured: DOPRI5 2.6e-7, RODAS4 1.3e-9 (the force jumps by c ẋ at each contact, which
+    // the switch location has to catch).
+    assert!(
+        e_dopri < 1e-6,
+        "DOPRI5, contact-only damping: max error {e_dopri:e}"
+    );
+    assert!(
+        e_rodas < 1e-7,
+        "RODAS4, contact-only damping: max error {e_rodas:e}"
+    );
+    // The default (damping everywhere) is a different motion: the option really changes the
+    // dynamics, and the reference can tell them apart. Measured: 5.0.
+    let e_viscous = run(false, false);
+    assert!(
+        e_viscous > 0.1,
+        "viscous model within {e_viscous:e} of the free-flight one"
     );
 }

@@ -11,7 +11,7 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::model::rig_b::{ARCMIN_PER_RAD, ELEMENTS};
+use crate::model::rig_b::{ARCMIN_PER_RAD, ELEMENTS, MeshDamping};
 use crate::model::{
     Assembly, DimensionlessModel, GearOde, LoadCase, ModelBConfig, ModelBOptions, Reconstructor,
     StiffnessForm, StiffnessShape, static_state,
@@ -530,6 +530,7 @@ pub fn simulate_reversal(
         backlash,
         loads: LoadCase::Reversal { at_s },
         load_torque_nm: Some(torque_nm),
+        ..Default::default()
     };
     let p = Prepared::new(cfg, &opts)?;
     let wh = p.omega_h();
@@ -657,6 +658,8 @@ pub struct LoadDropRun {
 /// The load-drop comparison: with and without return difference (configured backlash vs 0).
 #[derive(Debug, Clone, Serialize)]
 pub struct LoadDropReport {
+    /// Where the mesh damping acts in both runs.
+    pub mesh_damping: MeshDamping,
     pub at_s: f64,
     pub end_s: f64,
     pub torque_nm: f64,
@@ -666,13 +669,82 @@ pub struct LoadDropReport {
     pub decay_time_ratio: f64,
     pub oscillation_ratio: f64,
     pub first_peak_ratio: f64,
+    /// Extrema of the response with return difference (above its 5 % level) that are larger
+    /// than every excursion the drive without return difference still makes from that time on:
+    /// the paper's "several oscillations larger than without".
+    pub larger_extrema_than_without: usize,
+}
+
+/// Extrema `(t, r)` of `r = x − x_final` after `t_drop`.
+fn extrema_after(t: &[f64], x: &[f64], t_drop: f64, fin: f64) -> Vec<(f64, f64)> {
+    let r: Vec<(f64, f64)> = t
+        .iter()
+        .zip(x)
+        .filter(|(tt, _)| **tt >= t_drop)
+        .map(|(tt, v)| (*tt, v - fin))
+        .collect();
+    (1..r.len().saturating_sub(1))
+        .filter(|&k| {
+            let (a, b, c) = (r[k - 1].1, r[k].1, r[k + 1].1);
+            (b > a && b >= c) || (b < a && b <= c)
+        })
+        .map(|k| r[k])
+        .collect()
+}
+
+/// See [`LoadDropReport::larger_extrema_than_without`].
+fn larger_extrema(with: &LoadDropRun, without: &LoadDropRun, t_drop: f64) -> usize {
+    let level = 0.05 * with.measures.first_peak_arcmin;
+    let fin = without.measures.final_dte_arcmin;
+    // Remaining envelope of the run without: max |r| over [t, end], from the back.
+    let mut env = vec![0.0_f64; without.t.len()];
+    let mut m = 0.0_f64;
+    for k in (0..without.t.len()).rev() {
+        m = m.max((without.dte[k] - fin).abs());
+        env[k] = m;
+    }
+    let env_at = |t: f64| {
+        let k = without.t.partition_point(|&tt| tt < t);
+        env.get(k).copied().unwrap_or(0.0)
+    };
+    extrema_after(&with.t, &with.dte, t_drop, with.measures.final_dte_arcmin)
+        .iter()
+        .filter(|(t, r)| r.abs() > level && r.abs() > env_at(*t))
+        .count()
+}
+
+/// The load drop under both mesh-damping models.
+#[derive(Debug, Clone, Serialize)]
+pub struct LoadDropComparison {
+    /// Damping `ct δ̇` everywhere (the paper's equations as written).
+    pub viscous: LoadDropReport,
+    /// Damping only while the teeth are in contact (free flight in the clearance).
+    pub contact_only: LoadDropReport,
+}
+
+/// [`load_drop`] under both mesh-damping models.
+pub fn load_drop_comparison(
+    cfg: &ModelBConfig,
+    stiffness: StiffnessForm,
+    at_s: f64,
+    end_s: f64,
+    sample_hz: f64,
+    solver: &SolverSettings,
+) -> Result<LoadDropComparison> {
+    let run = |d| load_drop(cfg, stiffness, d, at_s, end_s, sample_hz, solver);
+    Ok(LoadDropComparison {
+        viscous: run(MeshDamping::Viscous)?,
+        contact_only: run(MeshDamping::ContactOnly)?,
+    })
 }
 
 /// Run the load drop at `at_s` (load and motor torque to zero) until `end_s`, sampled at
 /// `sample_hz`, for one backlash setting. The response is the output transmission error.
+#[allow(clippy::too_many_arguments)]
 pub fn load_drop_run(
     cfg: &ModelBConfig,
     stiffness: StiffnessForm,
+    mesh_damping: MeshDamping,
     backlash: bool,
     at_s: f64,
     end_s: f64,
@@ -687,6 +759,7 @@ pub fn load_drop_run(
         backlash,
         loads: LoadCase::LoadDrop { at_s },
         load_torque_nm: None,
+        mesh_damping,
     };
     let p = Prepared::new(cfg, &opts)?;
     let wh = p.omega_h();
@@ -715,19 +788,33 @@ pub fn load_drop_run(
     })
 }
 
-/// Both load-drop runs and their ratios.
+/// Both load-drop runs (with and without backlash, same mesh-damping model) and their ratios.
 pub fn load_drop(
     cfg: &ModelBConfig,
     stiffness: StiffnessForm,
+    mesh_damping: MeshDamping,
     at_s: f64,
     end_s: f64,
     sample_hz: f64,
     solver: &SolverSettings,
 ) -> Result<LoadDropReport> {
-    let with = load_drop_run(cfg, stiffness, true, at_s, end_s, sample_hz, solver)?;
-    let without = load_drop_run(cfg, stiffness, false, at_s, end_s, sample_hz, solver)?;
+    let run = |backlash| {
+        load_drop_run(
+            cfg,
+            stiffness,
+            mesh_damping,
+            backlash,
+            at_s,
+            end_s,
+            sample_hz,
+            solver,
+        )
+    };
+    let with = run(true)?;
+    let without = run(false)?;
     let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::INFINITY };
     Ok(LoadDropReport {
+        mesh_damping,
         at_s,
         end_s,
         torque_nm: cfg.load_torque_nm,
@@ -737,6 +824,7 @@ pub fn load_drop(
             with.measures.first_peak_arcmin,
             without.measures.first_peak_arcmin,
         ),
+        larger_extrema_than_without: larger_extrema(&with, &without, at_s),
         with_return_difference: with,
         without_return_difference: without,
     })

@@ -283,6 +283,11 @@ impl Assembly {
             omega_ratio: self.elements.iter().map(|e| e.freq_ratio).collect(),
             phase: self.elements.iter().map(|e| e.phase).collect(),
             backlash: self.elements.iter().map(|e| e.backlash / b).collect(),
+            damping_in_contact_only: self
+                .elements
+                .iter()
+                .map(|e| e.damping_in_contact_only)
+                .collect(),
             error,
             omega_h,
             length_ref: b,

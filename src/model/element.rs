@@ -177,6 +177,14 @@ pub struct Element {
     pub backlash: f64,
     /// Prescribed error `e_j(t) = Σ a sin(ω τ + φ)` (amplitudes in the deflection's unit).
     pub error: Vec<Harmonic>,
+    /// Contact-only damping: the viscous term acts only while the clearance is closed,
+    /// `F = k f_b(d) + c ḋ` for `|d| > b` and `F = 0` inside the clearance (free flight). This is
+    /// the usual contact-damping choice of backlash/impact models (the damping models the
+    /// losses of the loaded tooth contact, which are absent while the flanks are apart).
+    /// `false` (the default, and the first seed's form): `c ḋ` acts everywhere. Has no effect
+    /// when `backlash` is 0.
+    #[serde(default)]
+    pub damping_in_contact_only: bool,
 }
 
 impl Element {
@@ -209,6 +217,7 @@ impl Element {
             damping,
             backlash,
             error: Vec::new(),
+            damping_in_contact_only: false,
         }
     }
 
@@ -231,6 +240,7 @@ impl Element {
             damping,
             backlash: 0.0,
             error: Vec::new(),
+            damping_in_contact_only: false,
         }
     }
 
@@ -247,6 +257,7 @@ impl Element {
             damping,
             backlash: 0.0,
             error: Vec::new(),
+            damping_in_contact_only: false,
         }
     }
 
@@ -264,6 +275,13 @@ impl Element {
             freq_ratio,
             phase,
         });
+        self
+    }
+
+    /// Let the viscous damping act only while the clearance is closed (see
+    /// [`Element::damping_in_contact_only`]).
+    pub fn with_contact_only_damping(mut self, on: bool) -> Self {
+        self.damping_in_contact_only = on;
         self
     }
 

@@ -137,6 +137,19 @@ pub enum LoadCase {
     Reversal { at_s: f64 },
 }
 
+/// Where the mesh damping acts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MeshDamping {
+    /// `kt f(δ) + ct δ̇` everywhere, also inside the clearance (the paper's equations as
+    /// written, and the first seed's form).
+    #[default]
+    Viscous,
+    /// `kt f(δ) + ct δ̇` only while the teeth are in contact (`|δ| > b`), no force inside the
+    /// clearance: the usual contact-damping choice of backlash models.
+    ContactOnly,
+}
+
 /// Variant of the configured rig for one run.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ModelBOptions {
@@ -147,6 +160,9 @@ pub struct ModelBOptions {
     pub loads: LoadCase,
     /// Output torque (N·m); `None`: the configured `load_torque_nm`.
     pub load_torque_nm: Option<f64>,
+    /// Where the two meshes' damping acts.
+    #[serde(default)]
+    pub mesh_damping: MeshDamping,
 }
 
 impl Default for ModelBOptions {
@@ -156,6 +172,7 @@ impl Default for ModelBOptions {
             backlash: true,
             loads: LoadCase::Steady,
             load_torque_nm: None,
+            mesh_damping: MeshDamping::Viscous,
         }
     }
 }
@@ -349,6 +366,7 @@ impl ModelBConfig {
             }
         };
         let (m1, m2) = (&self.mesh1, &self.mesh2);
+        let contact_only = opts.mesh_damping == MeshDamping::ContactOnly;
         let bearing = |name: &str| {
             Element::bearing(
                 name,
@@ -370,7 +388,8 @@ impl ModelBConfig {
             )
             .with_term("y1", -1.0)
             .with_term("y2", 1.0)
-            .with_phase(TAU * m1.phase_fraction),
+            .with_phase(TAU * m1.phase_fraction)
+            .with_contact_only_damping(contact_only),
             Element::mesh(
                 "mesh2",
                 ("theta3", r.rb3),
@@ -383,7 +402,8 @@ impl ModelBConfig {
             )
             .with_term("y3", -1.0)
             .with_term("y4", 1.0)
-            .with_phase(TAU * m2.phase_fraction),
+            .with_phase(TAU * m2.phase_fraction)
+            .with_contact_only_damping(contact_only),
             Element::shaft(
                 "shaft1",
                 "theta0",

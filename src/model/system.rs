@@ -16,7 +16,9 @@ use crate::solver::OdeSystem;
 /// ```
 ///
 /// with `s_j` the element's stiffness shape of mean 1 (`1 + ε cos(·)` for the first harmonic)
-/// and `f` the dead zone of half-width `backlash_j`. Element order is the assembly's.
+/// and `f` the dead zone of half-width `backlash_j`. Element order is the assembly's. An element
+/// with `damping_in_contact_only` has `k̄_j f(x̄_j) + c̄_j x̄'_j` replaced by 0 while
+/// `|x̄_j| ≤ b̄_j` (free flight in the clearance).
 #[derive(Debug, Clone)]
 pub struct DimensionlessModel {
     pub name: String,
@@ -41,6 +43,9 @@ pub struct DimensionlessModel {
     pub phase: Vec<f64>,
     /// Half-clearance in units of `length_ref`.
     pub backlash: Vec<f64>,
+    /// Per element: damping only while in contact (`|x̄| > b̄`), zero force inside the
+    /// clearance ([`crate::model::Element::damping_in_contact_only`]).
+    pub damping_in_contact_only: Vec<bool>,
     /// Error harmonics per element, amplitudes in units of `length_ref`.
     pub error: Vec<Vec<Harmonic>>,
     /// Reference frequency `ω_h` (rad/s): `τ = ω_h t`.
@@ -177,6 +182,8 @@ struct ElementRt {
     k: f64,
     c: f64,
     b: f64,
+    /// Damping only in contact (`|x| > b`).
+    contact_only: bool,
     shape: ShapeRt,
     /// Index into the table of distinct frequencies, and cos/sin of the phase.
     freq: usize,
@@ -218,6 +225,9 @@ pub struct GearOde {
     f0: Vec<f64>,
     load_steps: Vec<(f64, Vec<f64>)>,
     backlash_idx: Vec<usize>,
+    /// Some element damps only in contact: the right-hand side takes the (slower) branch that
+    /// checks the clearance; otherwise the first seed's form runs unchanged.
+    any_contact_only: bool,
 }
 
 /// Smoothed contact-ratio square wave of mean `1` at phase fraction `u ∈ [0, 1)`.
@@ -282,6 +292,8 @@ impl GearOde {
                 k: m.k_ratio[j],
                 c: m.c[j],
                 b: m.backlash[j],
+                contact_only: m.damping_in_contact_only.get(j).copied().unwrap_or(false)
+                    && m.backlash[j] > 0.0,
                 shape,
                 freq: freq_index(w),
                 cos_phi: m.phase[j].cos(),
@@ -314,12 +326,13 @@ impl GearOde {
             n,
             omega1,
             a,
-            el,
             forcing,
             freqs,
             f0: m.f.clone(),
             load_steps: m.load_steps.clone(),
             backlash_idx: (0..n).filter(|&j| m.backlash[j] > 0.0).collect(),
+            any_contact_only: el.iter().any(|e| e.contact_only),
+            el,
         })
     }
 
@@ -352,20 +365,27 @@ impl GearOde {
         }
     }
 
-    /// The mesh forces `k̄ f(x̄) + c̄ x̄'` (dimensionless) at a state, e.g. as a sensor quantity.
+    /// The mesh forces `k̄ f(x̄) + c̄ x̄'` (dimensionless) at a state, e.g. as a sensor quantity
+    /// (0 inside the clearance for an element with contact-only damping).
     pub fn element_forces(&self, t: f64, y: &[f64], out: &mut [f64]) {
         let sc: Vec<(f64, f64)> = self.freqs.iter().map(|w| (w * t).sin_cos()).collect();
         for j in 0..self.n {
             let e = &self.el[j];
-            out[j] = self.stiffness(j, t, &sc) * dead_zone(y[j], e.b) + e.c * y[self.n + j];
+            out[j] = if e.contact_only && y[j].abs() <= e.b {
+                0.0
+            } else {
+                self.stiffness(j, t, &sc) * dead_zone(y[j], e.b) + e.c * y[self.n + j]
+            };
         }
     }
 
     /// Static load at τ (including load steps).
     fn static_load(&self, t: f64, i: usize) -> f64 {
         let mut f = self.f0[i];
+        // Left-continuous at a jump: a step that ends on τ sees the old load in all its stages;
+        // the solvers evaluate the new one at `τ.next_up()` when they start from τ.
         for (tau, d) in &self.load_steps {
-            if t >= *tau {
+            if t > *tau {
                 f += d[i];
             }
         }
@@ -402,9 +422,21 @@ impl OdeSystem for GearOde {
             fk_vec = vec![0.0; n];
             &mut fk_vec
         };
-        for j in 0..n {
-            let e = &self.el[j];
-            fk[j] = self.stiffness(j, t, sc) * dead_zone(y[j], e.b) + e.c * y[n + j];
+        if self.any_contact_only {
+            for j in 0..n {
+                let e = &self.el[j];
+                fk[j] = if e.contact_only && y[j].abs() <= e.b {
+                    // Free flight inside the clearance: neither spring nor damper.
+                    0.0
+                } else {
+                    self.stiffness(j, t, sc) * dead_zone(y[j], e.b) + e.c * y[n + j]
+                };
+            }
+        } else {
+            for j in 0..n {
+                let e = &self.el[j];
+                fk[j] = self.stiffness(j, t, sc) * dead_zone(y[j], e.b) + e.c * y[n + j];
+            }
         }
         let loads_static = self.load_steps.is_empty();
         for i in 0..n {

@@ -482,8 +482,9 @@ impl<S: OdeSystem + ?Sized> Integrator for Dopri5<'_, S> {
             {
                 self.t = self.breaks[self.next_break];
                 self.next_break += 1;
-                // The right-hand side jumps here: the FSAL derivative is stale.
-                self.sys.rhs(self.t, &self.y, &mut self.k[0]);
+                // The right-hand side jumps here: the FSAL derivative is the left limit; the
+                // next step needs the right one.
+                self.sys.rhs(self.t.next_up(), &self.y, &mut self.k[0]);
                 self.stats.rhs_evals += 1;
             }
             return Ok(());

@@ -33,7 +33,9 @@ pub trait OdeSystem {
     }
     /// Write the switching functions into `g` (length [`OdeSystem::n_switches`]).
     fn switches(&self, _t: f64, _y: &[f64], _g: &mut [f64]) {}
-    /// Times at which `f` jumps (load steps): the integrator lands on each exactly.
+    /// Times at which `f` jumps (load steps): the integrator lands on each exactly. `f` must be
+    /// left-continuous there (the value before the jump at `τ_b` itself); a solver starting a
+    /// step at `τ_b` evaluates the right limit at `τ_b.next_up()`.
     fn breakpoints(&self) -> Vec<f64> {
         Vec::new()
     }

@@ -132,6 +132,8 @@ pub struct Rodas4<'a, S: OdeSystem + ?Sized> {
     g_mid: Vec<f64>,
     breaks: Vec<f64>,
     next_break: usize,
+    /// The current point is a load jump: evaluate `f` (and its derivatives) as the right limit.
+    right_limit: bool,
     /// Gustafsson controller memory: last accepted step and its error.
     hacc: f64,
     erracc: f64,
@@ -192,6 +194,7 @@ impl<'a, S: OdeSystem + ?Sized> Rodas4<'a, S> {
             g_mid: vec![0.0; ns],
             breaks: sys.breakpoints(),
             next_break: 0,
+            right_limit: false,
             hacc: 0.0,
             erracc: 1e-2,
             n_accepted: 0,
@@ -234,6 +237,11 @@ impl<'a, S: OdeSystem + ?Sized> Rodas4<'a, S> {
     fn jacobian(&mut self) {
         let n = self.n;
         let u = f64::EPSILON;
+        let t0 = if self.right_limit {
+            self.t.next_up()
+        } else {
+            self.t
+        };
         self.ytmp.copy_from_slice(&self.y);
         for j in 0..n {
             let yj = self.y[j];
@@ -243,14 +251,14 @@ impl<'a, S: OdeSystem + ?Sized> Rodas4<'a, S> {
                 delta = -delta;
             }
             self.ytmp[j] = yj + delta;
-            self.sys.rhs(self.t, &self.ytmp, &mut self.ftmp);
+            self.sys.rhs(t0, &self.ytmp, &mut self.ftmp);
             for i in 0..n {
                 self.jac[(i, j)] = (self.ftmp[i] - self.f0[i]) / delta;
             }
             self.ytmp[j] = yj;
         }
         let dt = (u * self.t.abs().max(1e-5)).sqrt();
-        self.sys.rhs(self.t + dt, &self.y, &mut self.ftmp);
+        self.sys.rhs(t0 + dt, &self.y, &mut self.ftmp);
         for i in 0..n {
             self.fx[i] = (self.ftmp[i] - self.f0[i]) / dt;
         }
@@ -527,14 +535,21 @@ impl<S: OdeSystem + ?Sized> Integrator for Rodas4<'_, S> {
             } else if forced_h.is_none() || h_next > self.h {
                 self.h = h_next;
             }
+            self.right_limit = false;
             if lands
                 && self.next_break < self.breaks.len()
                 && self.t >= self.breaks[self.next_break]
             {
                 self.t = self.breaks[self.next_break];
                 self.next_break += 1;
+                self.right_limit = true;
             }
-            self.sys.rhs(self.t, &self.y, &mut self.f0);
+            let t_eval = if self.right_limit {
+                self.t.next_up()
+            } else {
+                self.t
+            };
+            self.sys.rhs(t_eval, &self.y, &mut self.f0);
             self.stats.rhs_evals += 1;
             return Ok(());
         }
