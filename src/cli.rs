@@ -35,6 +35,10 @@ pub enum Command {
     Model(ModelArgs),
     /// Characteristic frequencies of the rig (the first seed's Table 2).
     Frequencies(FrequenciesArgs),
+    /// Simulate the signature table for diagnosis (ea × Ω1 × seeds).
+    Precompute(crate::diagnosis_cli::PrecomputeArgs),
+    /// Estimate the wear degree from an accelerometer record.
+    Diagnose(crate::diagnosis_cli::DiagnoseArgs),
 }
 
 /// Options shared by the simulation commands.
@@ -49,7 +53,7 @@ pub struct RigArgs {
 }
 
 impl RigArgs {
-    fn load(&self) -> Result<ModelAConfig> {
+    pub(crate) fn load(&self) -> Result<ModelAConfig> {
         Ok(match &self.config {
             Some(p) => ModelAConfig::from_file(p)?,
             None => ModelAConfig::default_rig(),
@@ -232,6 +236,8 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Bifurcation(a) => bifurcation_cmd(a),
         Command::Model(a) => model_cmd(a),
         Command::Frequencies(a) => frequencies(a),
+        Command::Precompute(a) => crate::diagnosis_cli::precompute_cmd(a),
+        Command::Diagnose(a) => crate::diagnosis_cli::diagnose_cmd(a),
     }
 }
 
