@@ -34,6 +34,7 @@ struct Row {
     f1_error_rel: f64,
     planetary_flag: bool,
     motion: String,
+    chi2_per_feature: f64,
     error: Option<String>,
 }
 
@@ -90,6 +91,7 @@ fn main() {
                 snr_db: Some(20.0),
                 seed,
                 sensor: SensorQuantity::Accel,
+                planetary: None,
             };
             let rec = simulate_measurement_with(&model, &spec).expect("simulation");
             let known = k % 2 == 0;
@@ -110,6 +112,7 @@ fn main() {
                     f1_error_rel: d.f1_hz / (om * cfg.reference_frequency_hz) - 1.0,
                     planetary_flag: d.planetary_clearance_elevated,
                     motion: d.motion_state,
+                    chi2_per_feature: d.fit.chi2_per_feature,
                     error: None,
                 },
                 Err(e) => Row {
@@ -123,6 +126,7 @@ fn main() {
                     f1_error_rel: f64::NAN,
                     planetary_flag: false,
                     motion: String::new(),
+                    chi2_per_feature: f64::NAN,
                     error: Some(e.to_string()),
                 },
             }
@@ -179,6 +183,22 @@ fn main() {
         "\nplanetary flag raised (false positives, planetary error is 0.1 in every record): {flags}/{n}"
     );
     println!("f1 off by more than 0.1 %: {bad_f1}/{n}");
+    let mut chi: Vec<f64> = rows
+        .iter()
+        .filter(|r| r.error.is_none())
+        .map(|r| r.chi2_per_feature)
+        .collect();
+    chi.sort_by(f64::total_cmp);
+    if !chi.is_empty() {
+        let q = |p: f64| chi[((chi.len() - 1) as f64 * p).round() as usize];
+        println!(
+            "χ² per feature at the best point: median {:.2}, 90 % {:.2}, 99 % {:.2}, max {:.2}",
+            q(0.5),
+            q(0.9),
+            q(0.99),
+            q(1.0)
+        );
+    }
     for r in rows.iter().filter(|r| r.error.is_some()).take(5) {
         println!(
             "error: ea {:.3} Ω1 {}: {}",
@@ -191,6 +211,50 @@ fn main() {
         "simulation + diagnosis wall time: {wall:.1} s on {} threads",
         rayon::current_num_threads()
     );
+
+    // Planetary flag sensitivity: records with an elevated planetary error.
+    let n_planet: usize = env("ACC_PLANET_N", 40);
+    for pe in [0.2, 0.3, 0.5] {
+        let flagged: Vec<(bool, f64)> = (0..n_planet)
+            .into_par_iter()
+            .map(|k| {
+                let mut r = SplitMix64::new(mix_seed(&[base, 0x9A7E, k as u64]));
+                let ea = r.range(0.1, 1.0);
+                let om = speeds[k % speeds.len()];
+                let rec = gearwear::signature::precompute::simulate_measurement(
+                    &cfg,
+                    &MeasurementSpec {
+                        ea,
+                        omega1: om,
+                        sample_rate: fs,
+                        duration: 1.0,
+                        gain: 1.0,
+                        snr_db: Some(20.0),
+                        seed: r.next_u64(),
+                        sensor: SensorQuantity::Accel,
+                        planetary: Some(pe),
+                    },
+                )
+                .expect("simulation");
+                let o = DiagnoseOptions {
+                    shaft_hz: Some(om * cfg.reference_frequency_hz / 29.0),
+                    ..opts.clone()
+                };
+                match gearwear::diagnosis::diagnose(&rec, &table, &o) {
+                    Ok(d) => (
+                        d.planetary_clearance_elevated,
+                        (d.wear_degree.estimate - ea).abs(),
+                    ),
+                    Err(_) => (false, f64::NAN),
+                }
+            })
+            .collect();
+        let hits = flagged.iter().filter(|f| f.0).count();
+        let mae = flagged.iter().map(|f| f.1).sum::<f64>() / flagged.len().max(1) as f64;
+        println!(
+            "planetary error {pe}: flag raised on {hits}/{n_planet} records (speed given); ea MAE on them {mae:.3}"
+        );
+    }
 
     // Time of one diagnose, 1 s at 25.6 kHz, Ω1 = 1, tacho-less and with the speed.
     let model = cfg
@@ -209,6 +273,7 @@ fn main() {
             snr_db: Some(20.0),
             seed: 1,
             sensor: SensorQuantity::Accel,
+            planetary: None,
         },
     )
     .unwrap();

@@ -58,6 +58,8 @@ pub struct DiagnoseOptions {
     pub planetary_z: f64,
     /// Step of the fine ea grid of the posterior.
     pub ea_step: f64,
+    /// Goodness-of-fit warning threshold on χ² per feature (see [`Fit`]).
+    pub max_chi2_per_feature: f64,
 }
 
 impl Default for DiagnoseOptions {
@@ -71,6 +73,7 @@ impl Default for DiagnoseOptions {
             temperature: 1.0,
             planetary_z: 3.0,
             ea_step: 0.0025,
+            max_chi2_per_feature: 5.0,
         }
     }
 }
@@ -105,6 +108,8 @@ pub struct F1Detection {
     pub score: f64,
     pub runner_up_hz: Option<f64>,
     pub runner_up_score: Option<f64>,
+    /// Best candidates `(Hz, score, partners found)` of the tacho-less search.
+    pub candidates: Vec<(f64, f64, Vec<String>)>,
 }
 
 /// One measured line.
@@ -152,6 +157,25 @@ pub struct Baseline {
     pub ea: f64,
 }
 
+/// How well the best table point explains the record.
+#[derive(Debug, Clone, Serialize)]
+pub struct Fit {
+    /// `Σ_d (y_d − μ_d)² / (σ_d² + feature_sigma²)` over the wear features at (mode, Ω1).
+    pub chi2: f64,
+    /// Number of features in the sum.
+    pub features: usize,
+    /// `chi2 / features`; ≈ 1 for a record the model explains. Above
+    /// [`DiagnoseOptions::max_chi2_per_feature`] a warning says the record does not look like
+    /// this model's output (another gearbox, another sensor position, a fault the model lacks).
+    pub chi2_per_feature: f64,
+    /// True when the fit was poor and the likelihood was flattened by `chi2_per_feature`.
+    pub inflated: bool,
+}
+
+fn fit_is_poor(chi2_per_feature: f64, opts: &DiagnoseOptions) -> bool {
+    chi2_per_feature.is_nan() || chi2_per_feature > opts.max_chi2_per_feature
+}
+
 /// Record facts.
 #[derive(Debug, Clone, Serialize)]
 pub struct RecordInfo {
@@ -188,6 +212,7 @@ pub struct Diagnosis {
     /// Posterior density over ea on a 0.01 grid: `(ea, density)`.
     pub posterior: Vec<(f64, f64)>,
     pub baseline_single_ratio: Baseline,
+    pub fit: Fit,
     pub record: RecordInfo,
     /// Table identity.
     pub table_model_hash: String,
@@ -334,6 +359,20 @@ impl Matcher {
             ll += -0.5 * (y[d] - m).powi(2) / var - 0.5 * var.ln();
         }
         ll / opts.temperature.max(1e-9)
+    }
+
+    /// χ² of the clipped features `y` at `(ea, Ω1)` and the number of features in it.
+    pub fn chi2(&self, y: &[f64], ea: f64, om: f64, opts: &DiagnoseOptions) -> (f64, usize) {
+        let s0 = opts.feature_sigma * opts.feature_sigma;
+        let c = self
+            .wear_features
+            .iter()
+            .map(|&d| {
+                let (m, v) = self.stats_at(d, ea, om);
+                (y[d] - m).powi(2) / (v + s0)
+            })
+            .sum();
+        (c, self.wear_features.len())
     }
 
     /// Log-likelihood at a grid entry (no interpolation).
@@ -592,7 +631,7 @@ fn locate_f1(
     let w = crate::signal::window(Window::Hann, x.len());
     let parts = partners(fr);
     let evidence = |f: f64| -> (f64, Vec<String>) {
-        let mut score = spec.prominence(f, tol(f)).clamp(0.0, 40.0);
+        let mut score = spec.prominence(f, tol(f)).clamp(0.0, 60.0);
         let mut found = Vec::new();
         for (name, r) in &parts {
             let fp = r * f;
@@ -622,6 +661,7 @@ fn locate_f1(
                 score,
                 runner_up_hz: None,
                 runner_up_score: None,
+                candidates: Vec::new(),
             },
         ));
     }
@@ -661,7 +701,18 @@ fn locate_f1(
         })
         .collect();
     scored.sort_by(|a, b| b.1.total_cmp(&a.1));
-    let (f0, score, found, prom) = scored[0].clone();
+    // Harmonic ambiguity: with a rich nonlinear spectrum, 2·f1 finds "partners" too (the
+    // combination tones 2·f2, 2·(f1 − f2), …). Prefer the half-frequency candidate when it is
+    // nearly as well supported and carries most of the first-order partners.
+    let mut pick = 0;
+    for (k, c) in scored.iter().enumerate().skip(1) {
+        let best = &scored[0];
+        if (c.0 - 0.5 * best.0).abs() <= tol(c.0) && c.1 >= best.1 - 15.0 && c.2.len() >= 4 {
+            pick = k;
+            break;
+        }
+    }
+    let (f0, score, found, prom) = scored[pick].clone();
     let f = refine_peak(x, fs, f0 - 1.5 * df, f0 + 1.5 * df, &w);
     Ok((
         f,
@@ -673,6 +724,11 @@ fn locate_f1(
             score,
             runner_up_hz: scored.get(1).map(|s| s.0),
             runner_up_score: scored.get(1).map(|s| s.1),
+            candidates: scored
+                .iter()
+                .take(4)
+                .map(|s| (s.0, s.1, s.2.clone()))
+                .collect(),
         },
     ))
 }
@@ -808,7 +864,30 @@ pub fn diagnose_with(
     }
     let meas = measure_lines(x, fs, f1, lines)?;
     let y = matcher.clip(&meas.features(lines));
-    let post = posterior(matcher, &y, omega1, opts);
+    let mut post = posterior(matcher, &y, omega1, opts);
+    let (chi2, nfeat) = matcher.chi2(&y, post.mode(), post.omega_mean, opts);
+    let fit = Fit {
+        chi2,
+        features: nfeat,
+        chi2_per_feature: chi2 / nfeat.max(1) as f64,
+        inflated: fit_is_poor(chi2 / nfeat.max(1) as f64, opts),
+    };
+    if fit.inflated {
+        // Birge-ratio inflation: scale every variance by χ²/D so the interval reflects the
+        // misfit instead of the (then meaningless) nominal spread.
+        let inflated = DiagnoseOptions {
+            temperature: opts.temperature * fit.chi2_per_feature,
+            ..opts.clone()
+        };
+        post = posterior(matcher, &y, omega1, &inflated);
+        warnings.push(format!(
+            "poor fit: χ² per feature {:.1} at the best table point (threshold {}); the record \
+             does not look like this model's output (another gearbox, sensor or fault?). The \
+             likelihood was flattened by that factor; treat the wear degree and the planetary \
+             flag as unreliable",
+            fit.chi2_per_feature, opts.max_chi2_per_feature
+        ));
+    }
     let c = opts.credible_level.clamp(0.0, 1.0);
     let wear = WearDegree {
         estimate: post.quantile(0.5),
@@ -918,6 +997,7 @@ pub fn diagnose_with(
         condition_indicators: ci,
         nearest_entries: near,
         posterior: coarse,
+        fit,
         baseline_single_ratio: Baseline {
             method: "paper: ea whose table mean ln(A_f2/A_f1) at the measured Ω1 is closest",
             ea: matcher.baseline(&y, omega1, opts.ea_step),

@@ -194,6 +194,7 @@ fn recovers_wear_on_held_out_simulations() {
                 snr_db: Some(20.0),
                 seed: 0xD1A6_0000 + k as u64,
                 sensor: SensorQuantity::Accel,
+                planetary: None,
             },
         )
         .unwrap();

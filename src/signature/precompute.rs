@@ -404,6 +404,8 @@ pub struct MeasurementSpec {
     /// Seed of the initial state, transient length and noise.
     pub seed: u64,
     pub sensor: SensorQuantity,
+    /// Planetary composite-error amplitude (units of b); `None`: the configuration's baseline.
+    pub planetary: Option<f64>,
 }
 
 /// Simulate a measured record of the configured gearbox (random initial state, transient as in
@@ -412,11 +414,16 @@ pub fn simulate_measurement(
     cfg: &ModelAConfig,
     spec: &MeasurementSpec,
 ) -> Result<crate::record::Record> {
-    let model = cfg.assembly(Wear::fixed_axis(spec.ea))?.resolve()?;
+    let model = cfg
+        .assembly(Wear {
+            ea: spec.ea,
+            planetary: spec.planetary,
+        })?
+        .resolve()?;
     simulate_measurement_with(&model, spec)
 }
 
-/// [`simulate_measurement`] with a resolved model for `spec.ea`.
+/// [`simulate_measurement`] with a resolved model for `spec.ea` (and `spec.planetary`).
 pub fn simulate_measurement_with(
     model: &DimensionlessModel,
     spec: &MeasurementSpec,
