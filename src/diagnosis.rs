@@ -60,6 +60,18 @@ pub struct DiagnoseOptions {
     pub ea_step: f64,
     /// Goodness-of-fit warning threshold on χ² per feature (see [`Fit`]).
     pub max_chi2_per_feature: f64,
+    /// Tacho-less only: above this χ² per feature the other f1 candidates of the spectral
+    /// search are tried and the best-fitting one is kept (held-out simulations stay below ≈ 1.7,
+    /// a wrong f1 gave 30–150).
+    pub reselect_chi2_per_feature: f64,
+}
+
+/// Relative tolerance on the table's Ω1 band edges for a measured f1.
+pub const BAND_EDGE_TOLERANCE: f64 = 0.002;
+
+/// True if `v` is NaN or above `limit` (a NaN fit statistic counts as a bad fit).
+fn nan_or_above(v: f64, limit: f64) -> bool {
+    v.is_nan() || v > limit
 }
 
 impl Default for DiagnoseOptions {
@@ -70,10 +82,11 @@ impl Default for DiagnoseOptions {
             omega1_sigma: 0.01,
             floor_db: -40.0,
             feature_sigma: 0.25,
-            temperature: 1.0,
+            temperature: 1.5,
             planetary_z: 3.0,
             ea_step: 0.0025,
             max_chi2_per_feature: 5.0,
+            reselect_chi2_per_feature: 2.0,
         }
     }
 }
@@ -173,7 +186,7 @@ pub struct Fit {
 }
 
 fn fit_is_poor(chi2_per_feature: f64, opts: &DiagnoseOptions) -> bool {
-    chi2_per_feature.is_nan() || chi2_per_feature > opts.max_chi2_per_feature
+    nan_or_above(chi2_per_feature, opts.max_chi2_per_feature)
 }
 
 /// Record facts.
@@ -570,6 +583,12 @@ fn refine_peak(x: &[f64], fs: f64, a: f64, b: f64, w: &[f64]) -> f64 {
     0.5 * (a + b)
 }
 
+/// Refine a peak near `f0` (Hz) to the maximum of the whole-record Hann DTFT within ±`half`.
+fn refine_near(x: &[f64], fs: f64, f0: f64, half: f64) -> f64 {
+    let w = crate::signal::window(Window::Hann, x.len());
+    refine_peak(x, fs, (f0 - half).max(1e-9), f0 + half, &w)
+}
+
 /// Kinematic partners (name, ratio) used to recognise the stage-1 mesh line.
 fn partners(fr: &Frequencies) -> Vec<(&'static str, f64)> {
     vec![
@@ -835,7 +854,9 @@ pub fn diagnose_with(
     }
     let (f1, detection) = locate_f1(x, fs, &fr, search, nominal)?;
     let omega1 = f1 / f_ref;
-    if omega1 < olo - 1e-6 || omega1 > ohi + 1e-6 {
+    // Refinement may move a peak found at the band edge a hair outside it.
+    let edge = BAND_EDGE_TOLERANCE * olo;
+    if omega1 < olo - edge || omega1 > ohi + edge {
         return Err(Error::SpeedOutOfBand {
             f1_hz: f1,
             omega1,
@@ -862,10 +883,59 @@ pub fn diagnose_with(
             detection.partners_found
         ));
     }
-    let meas = measure_lines(x, fs, f1, lines)?;
-    let y = matcher.clip(&meas.features(lines));
-    let mut post = posterior(matcher, &y, omega1, opts);
-    let (chi2, nfeat) = matcher.chi2(&y, post.mode(), post.omega_mean, opts);
+    let evaluate = |f1: f64| -> Result<(LineMeasurement, Vec<f64>, Posterior, f64)> {
+        let meas = measure_lines(x, fs, f1, lines)?;
+        let y = matcher.clip(&meas.features(lines));
+        let post = posterior(matcher, &y, f1 / f_ref, opts);
+        let (chi2, _) = matcher.chi2(&y, post.mode(), post.omega_mean, opts);
+        Ok((meas, y, post, chi2))
+    };
+    let (mut f1, mut omega1, mut detection) = (f1, omega1, detection);
+    let (mut meas, mut y, mut post, mut chi2) = evaluate(f1)?;
+    let nfeat = matcher.wear_features.len();
+    if detection.method == "spectrum"
+        && nan_or_above(chi2 / nfeat.max(1) as f64, opts.reselect_chi2_per_feature)
+    {
+        // Tacho-less and the model explains the record worse than it explains its own
+        // simulations: maybe the wrong peak won (a harmonic or subharmonic of f1). Try the other
+        // spectral candidates and keep the one the model explains best.
+        let df = fs / x.len().min(1 << 17) as f64;
+        let first = chi2;
+        let mut chosen = None;
+        for &(cand, _, _) in detection.candidates.iter() {
+            if (cand - detection.initial_hz).abs() < 0.5 * df {
+                continue;
+            }
+            let fc = refine_near(x, fs, cand, 1.5 * df);
+            let om = fc / f_ref;
+            if om < olo - edge
+                || om > ohi + edge
+                || x.len() < needed_for(fc)
+                || 2.0 * top * fc >= fs
+            {
+                continue;
+            }
+            // Switch only to a candidate the model actually explains: when every candidate
+            // fits badly the record is not this gearbox's, and the spectral choice stands.
+            if let Ok(r) = evaluate(fc)
+                && r.3 < chi2
+                && r.3 <= opts.max_chi2_per_feature * nfeat as f64
+            {
+                (meas, y, post, chi2) = r;
+                chosen = Some((cand, fc));
+            }
+        }
+        if let Some((cand, fc)) = chosen {
+            warnings.push(format!(
+                "tacho-less f1 re-selected by model fit: the strongest candidate {f1:.2} Hz gave \
+                 χ² {first:.1}, the candidate {cand:.2} Hz (refined {fc:.2} Hz) gives {chi2:.1}"
+            ));
+            f1 = fc;
+            omega1 = fc / f_ref;
+            detection.method = "spectrum, re-selected by model fit";
+            detection.initial_hz = cand;
+        }
+    }
     let fit = Fit {
         chi2,
         features: nfeat,

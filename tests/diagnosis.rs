@@ -212,7 +212,10 @@ fn recovers_wear_on_held_out_simulations() {
         if w.lower <= ea && ea <= w.upper {
             inside += 1;
         }
-        assert!((w.estimate - ea).abs() < 0.25, "ea {ea}: {w:?}");
+        // The posterior can be bimodal (coexisting motions): then the median sits between the
+        // modes, so accept either summary being close.
+        let close = (w.estimate - ea).abs().min((w.mode - ea).abs());
+        assert!(close < 0.15, "ea {ea}: {w:?}");
     }
     assert!(inside >= 2, "only {inside} of 3 intervals hold the truth");
 }
@@ -302,4 +305,46 @@ fn a_real_record_from_another_gearbox_gets_an_answer_or_a_clear_error() {
         }
         Err(e) => eprintln!("SpectraQuest h30hz0 a1: clear error: {e}"),
     }
+}
+
+#[test]
+fn precompute_is_deterministic_and_resumes_from_its_partial_file() {
+    use gearwear::signature::precompute::{PrecomputeSpec, precompute};
+    use gearwear::signature::table::{Grid, SimulationSettings};
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let spec = PrecomputeSpec {
+        config: ModelAConfig::default_rig(),
+        sensor: SensorQuantity::Accel,
+        grid: Grid {
+            ea: vec![0.2, 0.8],
+            omega1: vec![1.0],
+            seeds: 2,
+        },
+        settings: SimulationSettings {
+            periods: 96,
+            ..Default::default()
+        },
+        created_by: "test".into(),
+    };
+    let partial = tmp("small.partial.jsonl");
+    let _ = std::fs::remove_file(&partial);
+    let count = AtomicUsize::new(0);
+    let a = precompute(&spec, Some(&partial), &|| {
+        count.fetch_add(1, Ordering::Relaxed);
+    })
+    .unwrap();
+    assert_eq!(count.load(Ordering::Relaxed), 2);
+    // Cut the partial file to the header and the first point: the rerun redoes only the second.
+    let text = std::fs::read_to_string(&partial).unwrap();
+    let kept: Vec<&str> = text.lines().take(2).collect();
+    std::fs::write(&partial, kept.join("\n") + "\n").unwrap();
+    let b = precompute(&spec, Some(&partial), &|| {}).unwrap();
+    for (x, y) in a.entries.iter().zip(&b.entries) {
+        assert_eq!(x.samples, y.samples, "deterministic seeds");
+    }
+    // The table round-trips through its file format.
+    let json = a.to_json().unwrap();
+    let back = SignatureTable::from_json(&json, "memory").unwrap();
+    assert_eq!(back.entries.len(), 2);
+    back.check_model(&ModelAConfig::default_rig()).unwrap();
 }
