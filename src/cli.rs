@@ -35,6 +35,10 @@ pub enum Command {
     Model(ModelArgs),
     /// Characteristic frequencies of the rig (the first seed's Table 2).
     Frequencies(FrequenciesArgs),
+    /// Line amplitudes of x̄1 versus wear at one Ω1 (the first seed's Figure 17).
+    WearLines(WearLinesArgs),
+    /// The second seed's 10-DOF space drive (Model B).
+    ModelB(crate::model_b_cli::ModelBArgs),
     /// Simulate the signature table for diagnosis (ea × Ω1 × seeds).
     Precompute(crate::diagnosis_cli::PrecomputeArgs),
     /// Estimate the wear degree from an accelerometer record.
@@ -82,6 +86,10 @@ pub struct SolveArgs {
     /// Absolute tolerance of the adaptive solver.
     #[arg(long, default_value_t = Dopri5Options::default().atol)]
     pub atol: f64,
+    /// Skip the largest-Lyapunov-exponent estimate (a twin trajectory; halves the cost, the
+    /// motion state then comes from the Poincaré geometry alone).
+    #[arg(long)]
+    pub no_lyapunov: bool,
 }
 
 impl SolveArgs {
@@ -100,6 +108,7 @@ impl SolveArgs {
                 atol: self.atol,
                 ..Default::default()
             },
+            lyapunov: !self.no_lyapunov,
         }
     }
 }
@@ -147,6 +156,9 @@ pub struct BifurcationArgs {
     /// PNG/SVG of the first element's diagram; the others get `_<element>` appended.
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// CSV with one row per Ω1: state, Lyapunov exponent, ranges.
+    #[arg(long)]
+    pub summary: Option<PathBuf>,
     #[command(flatten)]
     pub rig: RigArgs,
     #[command(flatten)]
@@ -171,6 +183,29 @@ pub struct ModelArgs {
     pub output: Option<PathBuf>,
     #[command(flatten)]
     pub rig: RigArgs,
+}
+
+#[derive(Debug, Args)]
+pub struct WearLinesArgs {
+    /// Operating frequency Ω1.
+    #[arg(long, default_value_t = 1.0)]
+    pub omega1: f64,
+    /// Wear grid START:END:STEP.
+    #[arg(long, default_value = "0.1:1:0.05")]
+    pub ea: String,
+    /// Element to analyse.
+    #[arg(long, default_value = "x1")]
+    pub element: String,
+    /// CSV output (one row per ea).
+    #[arg(long)]
+    pub output: Option<PathBuf>,
+    /// PNG/SVG of the line amplitudes versus ea.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    #[command(flatten)]
+    pub rig: RigArgs,
+    #[command(flatten)]
+    pub solve: SolveArgs,
 }
 
 #[derive(Debug, Args)]
@@ -236,6 +271,8 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Bifurcation(a) => bifurcation_cmd(a),
         Command::Model(a) => model_cmd(a),
         Command::Frequencies(a) => frequencies(a),
+        Command::WearLines(a) => wear_lines(a),
+        Command::ModelB(a) => crate::model_b_cli::run(a),
         Command::Precompute(a) => crate::diagnosis_cli::precompute_cmd(a),
         Command::Diagnose(a) => crate::diagnosis_cli::diagnose_cmd(a),
     }
@@ -313,6 +350,9 @@ fn bifurcation_cmd(a: BifurcationArgs) -> Result<()> {
     if let Some(p) = &a.output {
         write_or_print(Some(p), &res.to_csv())?;
     }
+    if let Some(p) = &a.summary {
+        write_or_print(Some(p), &res.summary_csv())?;
+    }
     if let Some(p) = &a.plot {
         for (e, name) in res.elements.iter().enumerate() {
             let path = if e == 0 { p.clone() } else { suffixed(p, name) };
@@ -328,10 +368,75 @@ fn bifurcation_cmd(a: BifurcationArgs) -> Result<()> {
             eprintln!("wrote {}", path.display());
         }
     }
-    if a.output.is_none() && a.plot.is_none() {
+    if a.output.is_none() && a.plot.is_none() && a.summary.is_none() {
         print!("{}", res.to_csv());
     }
     Ok(())
+}
+
+fn wear_lines(a: WearLinesArgs) -> Result<()> {
+    use rayon::prelude::*;
+    let cfg = a.rig.load()?;
+    let fr = cfg.tooth_counts().frequencies();
+    let (start, end, step) = parse_range(&a.ea)?;
+    let eas = grid(start, end, step);
+    let spec = a.solve.spec(a.omega1);
+    let rows: Vec<_> = eas
+        .par_iter()
+        .map(|&ea| -> Result<_> {
+            let w = wear(&a.rig, ea)?;
+            let model = cfg.assembly(w)?.resolve()?;
+            let element = model.index(&a.element)?;
+            let planetary = w.planetary.unwrap_or(cfg.assumed.planetary_error);
+            Ok(simulate_report(&model, &fr, &spec, ea, planetary, element)?.0)
+        })
+        .collect::<Result<_>>()?;
+    let mut csv = String::from("ea,f1,f2,2f2,f3,f1/2,f1-f2,motion_state,lyapunov_per_period\n");
+    for r in &rows {
+        let l = &r.lines;
+        csv.push_str(&format!(
+            "{},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{},{}\n",
+            r.ea,
+            l.f1,
+            l.f2,
+            l.two_f2,
+            l.f3,
+            l.half_f1,
+            l.f1_minus_f2,
+            r.motion_state,
+            r.classification
+                .lyapunov_per_period
+                .map(|v| format!("{v:.4}"))
+                .unwrap_or_default()
+        ));
+    }
+    if let Some(p) = &a.plot {
+        let x: Vec<f64> = rows.iter().map(|r| r.ea).collect();
+        let cols: [(&str, Vec<f64>); 6] = [
+            ("f1", rows.iter().map(|r| r.lines.f1).collect()),
+            ("f2", rows.iter().map(|r| r.lines.f2).collect()),
+            ("2f2", rows.iter().map(|r| r.lines.two_f2).collect()),
+            ("f3", rows.iter().map(|r| r.lines.f3).collect()),
+            ("f1/2", rows.iter().map(|r| r.lines.half_f1).collect()),
+            ("f1-f2", rows.iter().map(|r| r.lines.f1_minus_f2).collect()),
+        ];
+        let series: Vec<plot::Series> = cols
+            .iter()
+            .map(|(l, y)| plot::Series { label: l, x: &x, y })
+            .collect();
+        plot::lines(
+            p,
+            &format!(
+                "Line amplitudes of {} versus wear at Ω1 = {}",
+                a.element, a.omega1
+            ),
+            "wear degree ea",
+            &format!("peak amplitude of {} / b", a.element),
+            &series,
+        )?;
+        eprintln!("wrote {}", p.display());
+    }
+    write_or_print(a.output.as_deref(), &csv)
 }
 
 fn suffixed(p: &Path, name: &str) -> PathBuf {

@@ -16,12 +16,17 @@
 //!
 //! The numeric modules import nothing from a web framework or a database.
 
+// Numeric kernels index several arrays with one loop variable; iterator chains would hide the
+// equations. `!(x > 0.0)` is used on purpose: it is true for NaN, which must be refused too.
+#![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod analysis;
 pub mod cli;
 pub mod diagnosis;
 pub mod diagnosis_cli;
 pub mod error;
 pub mod model;
+pub mod model_b_cli;
 pub mod plot;
 pub mod record;
 pub mod signal;

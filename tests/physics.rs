@@ -761,3 +761,83 @@ fn samples_land_on_the_requested_grid() {
     let traj2 = run_system(&sys, &spec).unwrap();
     assert!(traj.states == traj2.states, "run and run_system differ");
 }
+
+// ---------------------------------------------------------------------------------------------
+// 6. Motion-state classification on known cases, through the solver and the Lyapunov twin.
+// ---------------------------------------------------------------------------------------------
+
+/// Ueda's oscillator x'' + 0.05 x' + x³ = 7.5 cos τ: a textbook chaotic attractor.
+struct Ueda;
+
+impl OdeSystem for Ueda {
+    fn dim(&self) -> usize {
+        2
+    }
+    fn rhs(&self, t: f64, y: &[f64], dy: &mut [f64]) {
+        dy[0] = y[1];
+        dy[1] = -0.05 * y[1] - y[0].powi(3) + 7.5 * t.cos();
+    }
+}
+
+fn classify_run<S: OdeSystem>(
+    sys: &S,
+    periods: usize,
+) -> gearwear::analysis::motion::Classification {
+    use gearwear::analysis::motion::{ClassifyOptions, classify_forced};
+    let spec = RunSpec {
+        omega1: 1.0,
+        periods,
+        samples_per_period: 64,
+        transient: Transient {
+            tau: 300.0,
+            periods: 0.0,
+        },
+        initial: vec![],
+        solver: Dopri5Options::default(),
+        lyapunov: true,
+    };
+    let traj = run_system(sys, &spec).unwrap();
+    let x = traj.series(0);
+    let v = traj.series(1);
+    let span = |s: &[f64]| {
+        s.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
+            - s.iter().cloned().fold(f64::INFINITY, f64::min)
+    };
+    let lyap = traj.lyapunov_per_period.unwrap();
+    classify_forced(
+        &traj.poincare(0),
+        (span(&x), span(&v)),
+        lyap,
+        &[],
+        &ClassifyOptions::default(),
+    )
+    .unwrap()
+}
+
+#[test]
+fn known_motion_states_are_classified() {
+    use gearwear::analysis::motion::MotionState;
+    // A damped linear oscillator under harmonic forcing: period-1, negative exponent.
+    let p = OneMesh {
+        c: 0.1,
+        k: 1.0,
+        b: 0.0,
+        f: 0.1,
+        a: 0.3,
+        w: 1.0,
+        phi: 0.0,
+    };
+    let model = one_mesh_assembly(&p).resolve().unwrap();
+    let sys = model.system(1.0).unwrap();
+    let c = classify_run(&sys, 80);
+    assert_eq!(c.state, MotionState::Periodic { period: 1 }, "{c:?}");
+    // Its exponent is the decay rate over one period: −(c/2)·2π = −0.314.
+    let l = c.lyapunov_per_period.unwrap();
+    assert!(
+        (l + 0.05 * std::f64::consts::TAU).abs() < 0.05,
+        "linear oscillator exponent {l}"
+    );
+    // Ueda's attractor: chaotic.
+    let c = classify_run(&Ueda, 150);
+    assert_eq!(c.state, MotionState::Chaotic, "{c:?}");
+}

@@ -7,7 +7,7 @@
 
 use serde::Serialize;
 
-use super::motion::{ClassifyOptions, MotionState, classify};
+use super::motion::{ClassifyOptions, MotionState, classify, classify_forced};
 use super::simulate::{RunSpec, observe};
 use crate::error::Result;
 use crate::model::DimensionlessModel;
@@ -24,6 +24,8 @@ pub struct BifurcationPoint {
     pub range: Vec<(f64, f64)>,
     /// Motion state of the first tracked element.
     pub state: MotionState,
+    /// Largest Lyapunov exponent per stage-1 mesh period, when computed.
+    pub lyapunov_per_period: Option<f64>,
     pub stats: Stats,
 }
 
@@ -40,7 +42,10 @@ pub fn grid(start: f64, end: f64, step: f64) -> Vec<f64> {
         return vec![start];
     }
     let n = ((end - start) / step + 1e-9).floor() as usize;
-    (0..=n).map(|i| start + i as f64 * step).collect()
+    // Rounded to 1e-9 so that 0.1 + 2·0.05 prints as 0.2, not 0.20000000000000004.
+    (0..=n)
+        .map(|i| ((start + i as f64 * step) * 1e9).round() / 1e9)
+        .collect()
 }
 
 /// Run one grid point.
@@ -55,7 +60,7 @@ pub fn point(
     let mut poincare = vec![Vec::with_capacity(spec.periods); elements.len()];
     let mut range = vec![(f64::INFINITY, f64::NEG_INFINITY); elements.len()];
     let mut v_range = (f64::INFINITY, f64::NEG_INFINITY);
-    let stats = observe(&sys, Some(model), spec, |k, _, y| {
+    let obs = observe(&sys, Some(model), spec, |k, _, y| {
         for (e, &j) in elements.iter().enumerate() {
             let x = y[j];
             range[e].0 = range[e].0.min(x);
@@ -71,13 +76,27 @@ pub fn point(
         (range[0].1 - range[0].0).max(1e-12),
         (v_range.1 - v_range.0).max(1e-12),
     );
-    let state = classify(&poincare[0], scale, &ClassifyOptions::default())?.state;
+    let opts = ClassifyOptions::default();
+    let state = match obs.lyapunov_per_period {
+        Some(l) => {
+            classify_forced(
+                &poincare[0],
+                scale,
+                l,
+                &model.other_frequency_ratios(),
+                &opts,
+            )?
+            .state
+        }
+        None => classify(&poincare[0], scale, &opts)?.state,
+    };
     Ok(BifurcationPoint {
         omega1: spec.omega1,
         poincare,
         range,
         state,
-        stats,
+        lyapunov_per_period: obs.lyapunov_per_period,
+        stats: obs.stats,
     })
 }
 
@@ -111,7 +130,7 @@ impl Bifurcation {
     /// CSV with one row per Poincaré sample:
     /// `omega1,state,<el>,<el>_velocity,…` for the tracked elements.
     pub fn to_csv(&self) -> String {
-        let mut s = String::from("omega1,state");
+        let mut s = String::from("omega1,state,lyapunov_per_period");
         for e in &self.elements {
             s.push_str(&format!(",{e},{e}_velocity"));
         }
@@ -119,12 +138,49 @@ impl Bifurcation {
         for p in &self.points {
             let m = p.poincare.iter().map(|v| v.len()).min().unwrap_or(0);
             for k in 0..m {
-                s.push_str(&format!("{},{}", p.omega1, p.state.label()));
+                let l = p
+                    .lyapunov_per_period
+                    .map(|l| format!("{l:.5}"))
+                    .unwrap_or_default();
+                s.push_str(&format!("{},{},{l}", p.omega1, p.state.label()));
                 for e in &p.poincare {
                     s.push_str(&format!(",{:.9},{:.9}", e[k].0, e[k].1));
                 }
                 s.push('\n');
             }
+        }
+        s
+    }
+
+    /// CSV with one row per grid point: the motion state, the Lyapunov exponent, and per
+    /// tracked element the range of `x̄` over the retained samples and the extent of its
+    /// Poincaré set (`max − min` of the Poincaré displacements).
+    pub fn summary_csv(&self) -> String {
+        let mut s = String::from("omega1,state,lyapunov_per_period");
+        for e in &self.elements {
+            s.push_str(&format!(",{e}_min,{e}_max,{e}_poincare_extent"));
+        }
+        s.push('\n');
+        for p in &self.points {
+            let l = p
+                .lyapunov_per_period
+                .map(|l| format!("{l:.5}"))
+                .unwrap_or_default();
+            s.push_str(&format!("{},{},{l}", p.omega1, p.state.label()));
+            for (e, pts) in p.poincare.iter().enumerate() {
+                let (lo, hi) = pts
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), q| {
+                        (a.min(q.0), b.max(q.0))
+                    });
+                s.push_str(&format!(
+                    ",{:.6},{:.6},{:.6}",
+                    p.range[e].0,
+                    p.range[e].1,
+                    hi - lo
+                ));
+            }
+            s.push('\n');
         }
         s
     }

@@ -130,6 +130,9 @@ pub struct Classification {
     /// Number of distinct clusters (greedy leader clustering with radius `rel_tol` in scaled
     /// coordinates, max-norm), capped at [`CLUSTER_CAP`].
     pub clusters: usize,
+    /// Largest Lyapunov exponent per forcing period `λ T`, when one was supplied
+    /// ([`classify_with_lyapunov`]).
+    pub lyapunov_per_period: Option<f64>,
 }
 
 /// Classify a motion from its Poincaré points (one per forcing period).
@@ -203,6 +206,7 @@ pub fn classify(
             k_01: None,
             spread,
             clusters,
+            lyapunov_per_period: None,
         });
     }
 
@@ -227,6 +231,7 @@ pub fn classify(
             k_01: Some(k),
             spread,
             clusters,
+            lyapunov_per_period: None,
         });
     }
 
@@ -235,11 +240,143 @@ pub fn classify(
         _ => MotionState::QuasiPeriodic,
     };
     Ok(Classification {
+        lyapunov_per_period: None,
         state,
         k_01: None,
         spread,
         clusters,
     })
+}
+
+/// Largest Lyapunov exponent per forcing period above which a motion is called chaotic.
+///
+/// Numerical noise on a stable (forcing-locked) attractor gives clearly negative values
+/// (about `−2π ξ ω / Ω` for the weakest-damped mode); a torus born of a Hopf bifurcation gives
+/// ≈ 0. A margin of 0.02 per period (2 % growth) keeps both on the regular side.
+pub const LYAPUNOV_CHAOS_THRESHOLD: f64 = 0.02;
+
+/// Classify with a measured largest Lyapunov exponent per forcing period `λ T` (see
+/// [`crate::analysis::simulate::observe`]). This is the reliable test for gear models whose
+/// other mesh frequencies are not harmonics of the sampled one: their Poincaré set of a
+/// perfectly regular response is a curve or a band, which short-series geometric tests can
+/// mistake for chaos. `λ T > LYAPUNOV_CHAOS_THRESHOLD` → chaotic; otherwise the geometric
+/// classification decides between period-n and quasi-periodic (never chaotic).
+pub fn classify_with_lyapunov(
+    points: &[(f64, f64)],
+    scale: (f64, f64),
+    lyapunov_per_period: f64,
+    opts: &ClassifyOptions,
+) -> Result<Classification> {
+    if !lyapunov_per_period.is_finite() {
+        return Err(Error::Signal(format!(
+            "Lyapunov exponent must be finite, got {lyapunov_per_period}"
+        )));
+    }
+    let mut c = classify(points, scale, opts)?;
+    c.lyapunov_per_period = Some(lyapunov_per_period);
+    c.state = if lyapunov_per_period > LYAPUNOV_CHAOS_THRESHOLD {
+        MotionState::Chaotic
+    } else {
+        match c.state {
+            MotionState::Chaotic => MotionState::QuasiPeriodic,
+            other => other,
+        }
+    };
+    Ok(c)
+}
+
+/// Harmonics of each other forcing phase used by [`classify_forced`].
+const FORCED_HARMONICS: usize = 3;
+
+/// Classify a response of a system forced at several frequencies, sampled once per period of
+/// the first one (for Model A: once per stage-1 mesh period, with stage 2 and the planetary
+/// stage at `other_ratios = [0.36, 0.0875]` of it).
+///
+/// A response locked to the forcing is a function of the forcing phases, so its Poincaré
+/// points are not one point but `x_k = g(φ_2(k), φ_3(k), …)` with `φ_i(k) = frac(r_i k)`: a
+/// curve or a band. This classifier therefore:
+/// 1. calls the motion chaotic when the largest Lyapunov exponent per period exceeds
+///    [`LYAPUNOV_CHAOS_THRESHOLD`];
+/// 2. otherwise looks for the smallest `n ≤ max_period` such that, within each residue class
+///    `k mod n`, the points are explained by a smooth periodic function of the other phases
+///    (a least-squares Fourier series with [`FORCED_HARMONICS`] harmonics of each phase) to
+///    within `rel_tol` of the motion's scale (RMS residual, both coordinates): that is
+///    **period-n** — `n` stage-1 periods, modulated by the other meshes;
+/// 3. otherwise **quasi-periodic** (a frequency of its own, e.g. a torus after a Hopf
+///    bifurcation).
+///
+/// Each class needs at least twice as many points as regressors; larger `n` are skipped when
+/// the series is too short.
+pub fn classify_forced(
+    points: &[(f64, f64)],
+    scale: (f64, f64),
+    lyapunov_per_period: f64,
+    other_ratios: &[f64],
+    opts: &ClassifyOptions,
+) -> Result<Classification> {
+    let mut c = classify_with_lyapunov(points, scale, lyapunov_per_period, opts)?;
+    if c.state == MotionState::Chaotic {
+        return Ok(c);
+    }
+    let n_reg = 1 + 2 * FORCED_HARMONICS * other_ratios.len();
+    for n in 1..=opts.max_period {
+        let mut ok = true;
+        let mut enough = true;
+        for class in 0..n {
+            let idx: Vec<usize> = (class..points.len()).step_by(n).collect();
+            if idx.len() < 2 * n_reg {
+                enough = false;
+                break;
+            }
+            let design = nalgebra::DMatrix::from_fn(idx.len(), n_reg, |row, col| {
+                if col == 0 {
+                    return 1.0;
+                }
+                let c0 = col - 1;
+                let (which, rest) = (c0 / (2 * FORCED_HARMONICS), c0 % (2 * FORCED_HARMONICS));
+                let (h, is_sin) = (rest / 2 + 1, rest % 2 == 0);
+                let phase = std::f64::consts::TAU
+                    * h as f64
+                    * (other_ratios[which] * idx[row] as f64).fract();
+                if is_sin { phase.sin() } else { phase.cos() }
+            });
+            let svd = design.clone().svd(true, true);
+            for (coord, sc) in [(0usize, scale.0), (1usize, scale.1)] {
+                let y = nalgebra::DVector::from_iterator(
+                    idx.len(),
+                    idx.iter()
+                        .map(|&k| if coord == 0 { points[k].0 } else { points[k].1 }),
+                );
+                let Ok(beta) = svd.solve(&y, 1e-10) else {
+                    ok = false;
+                    break;
+                };
+                let resid = &y - &design * beta;
+                let rms = (resid.norm_squared() / idx.len() as f64).sqrt();
+                if rms > opts.rel_tol * sc {
+                    ok = false;
+                    break;
+                }
+            }
+            if !ok {
+                break;
+            }
+        }
+        if !enough {
+            break;
+        }
+        if ok {
+            c.state = MotionState::Periodic { period: n };
+            return Ok(c);
+        }
+    }
+    if let MotionState::Periodic { .. } = c.state {
+        // The plain geometric test found a period the forced fit could not confirm only when
+        // the series was too short for the fit: keep it.
+        return Ok(c);
+    }
+    c.state = MotionState::QuasiPeriodic;
+    Ok(c)
 }
 
 /// Period detection on a Poincaré sequence.
@@ -963,5 +1100,58 @@ mod tests {
         // Errors of the integrator propagate.
         let fail = |_: &mut [f64], t: f64| Err(Error::NonFinite { t });
         assert!(largest_lyapunov(&[1.0], 1e-8, 1.0, 10, 0, fail).is_err());
+    }
+
+    #[test]
+    fn forced_classifier_sees_modulated_period_1_and_period_2() {
+        use std::f64::consts::TAU;
+        let r = [0.36, 0.0875];
+        let scale = (1.0, 1.0);
+        // Period-1 locked to three forcings: a smooth function of the other phases.
+        let p1: Vec<(f64, f64)> = (0..80)
+            .map(|k| {
+                let (a, b) = ((0.36 * k as f64).fract(), (0.0875 * k as f64).fract());
+                let x = 1.0 + 0.1 * (TAU * a).sin() + 0.03 * (TAU * b).cos();
+                (x, 0.2 * (TAU * a).cos())
+            })
+            .collect();
+        let c = classify_forced(&p1, scale, -0.1, &r, &ClassifyOptions::default()).unwrap();
+        assert_eq!(c.state, MotionState::Periodic { period: 1 });
+        // The plain geometric test calls the same set non-periodic.
+        assert_ne!(
+            classify(&p1, scale, &ClassifyOptions::default())
+                .unwrap()
+                .state,
+            MotionState::Periodic { period: 1 }
+        );
+        // Period-2: alternate branches.
+        let p2: Vec<(f64, f64)> = p1
+            .iter()
+            .enumerate()
+            .map(|(k, &(x, v))| {
+                if k % 2 == 0 {
+                    (x + 0.5, v)
+                } else {
+                    (x - 0.5, v)
+                }
+            })
+            .collect();
+        let c = classify_forced(&p2, scale, -0.1, &r, &ClassifyOptions::default()).unwrap();
+        assert_eq!(c.state, MotionState::Periodic { period: 2 });
+        // A frequency of its own (a torus): quasi-periodic.
+        let alpha = (5f64.sqrt() - 1.0) / 2.0;
+        let q: Vec<(f64, f64)> = (0..80)
+            .map(|k| {
+                (
+                    (TAU * alpha * k as f64).cos(),
+                    (TAU * alpha * k as f64).sin(),
+                )
+            })
+            .collect();
+        let c = classify_forced(&q, scale, -0.001, &r, &ClassifyOptions::default()).unwrap();
+        assert_eq!(c.state, MotionState::QuasiPeriodic);
+        // A positive exponent is chaos whatever the geometry.
+        let c = classify_forced(&p1, scale, 0.5, &r, &ClassifyOptions::default()).unwrap();
+        assert_eq!(c.state, MotionState::Chaotic);
     }
 }

@@ -4,7 +4,7 @@ use std::path::Path;
 
 use serde::Serialize;
 
-use super::motion::{Classification, ClassifyOptions, classify};
+use super::motion::{Classification, ClassifyOptions, classify, classify_forced};
 use super::simulate::{RunSpec, Trajectory, run};
 use crate::error::Result;
 use crate::model::{DimensionlessModel, Frequencies};
@@ -119,7 +119,11 @@ pub fn simulate_report(
     let sx = SeriesSummary::of(&x);
     let sv = SeriesSummary::of(&v);
     let scale = ((sx.max - sx.min).max(1e-12), (sv.max - sv.min).max(1e-12));
-    let classification = classify(&poincare, scale, &ClassifyOptions::default())?;
+    let opts = ClassifyOptions::default();
+    let classification = match traj.lyapunov_per_period {
+        Some(l) => classify_forced(&poincare, scale, l, &model.other_frequency_ratios(), &opts)?,
+        None => classify(&poincare, scale, &opts)?,
+    };
     Ok((
         SimulationReport {
             model: model.name.clone(),

@@ -64,6 +64,23 @@ impl DimensionlessModel {
         self.names.len()
     }
 
+    /// Distinct mesh and error frequencies other than the reference one, over it (Model A:
+    /// 0.36 and 0.0875). They modulate a response sampled once per reference period.
+    pub fn other_frequency_ratios(&self) -> Vec<f64> {
+        let mut v: Vec<f64> = Vec::new();
+        let all = self
+            .omega_ratio
+            .iter()
+            .cloned()
+            .chain(self.error.iter().flatten().map(|h| h.freq_ratio));
+        for r in all {
+            if r > 0.0 && (r - 1.0).abs() > 1e-12 && !v.iter().any(|x| (x - r).abs() < 1e-12) {
+                v.push(r);
+            }
+        }
+        v
+    }
+
     /// Index of an element by name.
     pub fn index(&self, name: &str) -> Result<usize> {
         self.names

@@ -100,7 +100,12 @@ pub struct Dopri5<'a, S: OdeSystem + ?Sized> {
     g_old: Vec<f64>,
     g_new: Vec<f64>,
     g_mid: Vec<f64>,
+    g_work: Vec<f64>,
     facold: f64,
+    /// The last accepted step was shortened to end on a switch.
+    on_switch: bool,
+    /// The last attempt was rejected (the next accepted step may not grow, HNW's rule).
+    rejected_last: bool,
     breaks: Vec<f64>,
     next_break: usize,
     stats: Stats,
@@ -142,7 +147,10 @@ impl<'a, S: OdeSystem + ?Sized> Dopri5<'a, S> {
             g_old: vec![0.0; ns],
             g_new: vec![0.0; ns],
             g_mid: vec![0.0; ns],
+            g_work: vec![0.0; ns],
             facold: 1e-4,
+            on_switch: false,
+            rejected_last: false,
             breaks: sys.breakpoints(),
             next_break: 0,
             stats: Stats::default(),
@@ -287,8 +295,15 @@ impl<'a, S: OdeSystem + ?Sized> Dopri5<'a, S> {
         self.dense_theta(0.5, &mut y_mid);
         sys.switches(self.t + 0.5 * h, &y_mid, &mut self.g_mid);
         let mut best: Option<f64> = None;
-        let theta_min = 1e-12 * self.t.abs().max(1.0) / h;
-        let mut g = vec![0.0; ns];
+        // Right after a step that ended on a switch, the state sits within the local error of
+        // the switching surface: a root in the first 0.1 % of the next step is that same
+        // switch, already handled (chasing it costs a tiny extra step).
+        let theta_min = if self.on_switch {
+            1e-3
+        } else {
+            1e-12 * self.t.abs().max(1.0) / h
+        };
+        let mut g = std::mem::take(&mut self.g_work);
         for i in 0..ns {
             let (g0, gm, g1) = (self.g_old[i], self.g_mid[i], self.g_new[i]);
             // Bracket: the first half if it changes sign there, else the second half.
@@ -302,10 +317,8 @@ impl<'a, S: OdeSystem + ?Sized> Dopri5<'a, S> {
             let Some((mut a, mut ga, mut b, mut gb)) = bracket else {
                 continue;
             };
-            if let Some(bst) = best {
-                if a >= bst {
-                    continue;
-                }
+            if best.is_some_and(|bst| a >= bst) {
+                continue;
             }
             // Illinois method on θ.
             let mut side = 0i8;
@@ -344,6 +357,7 @@ impl<'a, S: OdeSystem + ?Sized> Dopri5<'a, S> {
             }
         }
         self.ytmp = y_mid;
+        self.g_work = g;
         best
     }
 
@@ -354,6 +368,11 @@ impl<'a, S: OdeSystem + ?Sized> Dopri5<'a, S> {
         self.k.swap(0, 6);
         std::mem::swap(&mut self.g_old, &mut self.g_new);
         self.stats.steps += 1;
+    }
+
+    /// The step size the controller proposes next.
+    pub fn proposed_step(&self) -> f64 {
+        self.h
     }
 
     /// Time of the previous accepted step's start.
@@ -421,6 +440,7 @@ impl<S: OdeSystem + ?Sized> Integrator for Dopri5<'_, S> {
                 self.stats.rejected += 1;
                 self.h = h / (1.0 / 0.2f64).min(fac11 / SAFE);
                 forced_h = None;
+                self.rejected_last = true;
                 continue;
             }
             self.build_dense(h);
@@ -445,8 +465,14 @@ impl<S: OdeSystem + ?Sized> Integrator for Dopri5<'_, S> {
             let mut fac = fac11 / self.facold.powf(BETA);
             fac = (1.0 / 10.0f64).max((1.0 / 0.2f64).min(fac / SAFE));
             self.facold = err.max(1e-4);
-            let h_next = h / fac;
+            let mut h_next = h / fac;
+            if self.rejected_last {
+                // Hairer's rule: no growth right after a rejection.
+                h_next = h_next.min(h);
+                self.rejected_last = false;
+            }
             self.accept(h);
+            self.on_switch = forced_h.is_some();
             if forced_h.is_none() || h_next > self.h {
                 self.h = h_next;
             }

@@ -5,15 +5,19 @@
 //!   would carry a switch inside it is shortened so that it ends on the switch, so every step
 //!   integrates one smooth piece and keeps its order.
 //! - [`Rk4`]: classical fixed-step Runge–Kutta, the plain reference.
+//! - [`Rodas4`]: L-stable Rosenbrock 4(3) with a finite-difference Jacobian, dense output and
+//!   the same switch location, for stiff models (Model B).
 //!
 //! Both integrate `y' = f(τ, y)` given by an [`OdeSystem`] and are driven through
 //! [`Integrator`], which [`sample_uniform`] uses to deliver the solution on an exact grid.
 
 mod dopri5;
 mod rk4;
+mod rodas4;
 
 pub use dopri5::{Dopri5, Dopri5Options};
 pub use rk4::Rk4;
+pub use rodas4::{Rodas4, Rodas4Options};
 
 use crate::error::Result;
 

@@ -1,0 +1,182 @@
+//! The built binary, run as a user would.
+
+use std::process::Command;
+
+fn gearwear(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_gearwear"))
+        .args(args)
+        .output()
+        .expect("binary runs");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn tmpdir(name: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("gearwear-cli-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+#[test]
+fn simulate_prints_lines_and_motion_state_and_writes_plots() {
+    let dir = tmpdir("sim");
+    let (ok, out, err) = gearwear(&[
+        "simulate",
+        "--omega1",
+        "1",
+        "--ea",
+        "0.8",
+        "--periods",
+        "40",
+        "--plot",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    for k in ["f1", "f2", "2f2", "f3", "f1/2", "f1-f2"] {
+        let a = v["lines"][k]
+            .as_f64()
+            .unwrap_or_else(|| panic!("line {k} missing"));
+        assert!(a.is_finite() && a >= 0.0);
+    }
+    assert!(v["lines"]["f1"].as_f64().unwrap() > v["lines"]["f3"].as_f64().unwrap());
+    let state = v["motion_state"].as_str().unwrap();
+    assert!(state.starts_with("period-") || state == "quasi-periodic" || state == "chaotic");
+    assert!((v["f1_hz"].as_f64().unwrap() - 870.0).abs() < 1e-6);
+    for f in [
+        "time.png",
+        "phase.png",
+        "poincare.png",
+        "spectrum.png",
+        "overview.png",
+    ] {
+        let bytes = std::fs::read(dir.join(f)).unwrap();
+        assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+    }
+    std::fs::remove_dir_all(dir).ok();
+}
+
+#[test]
+fn model_export_is_complete_and_consistent() {
+    let (ok, out, err) = gearwear(&["model", "--export", "json"]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let a = v["A"].as_array().unwrap();
+    assert_eq!(a.len(), 10);
+    for (i, row) in a.iter().enumerate() {
+        let row = row.as_array().unwrap();
+        assert_eq!(row.len(), 10);
+        for (j, x) in row.iter().enumerate() {
+            let y = a[j][i].as_f64().unwrap();
+            assert!(
+                (x.as_f64().unwrap() - y).abs() < 1e-12,
+                "A not symmetric at {i},{j}"
+            );
+        }
+    }
+    assert!((a[0][0].as_f64().unwrap() - 1.0).abs() < 1e-12);
+    for k in [
+        "k_ratio",
+        "eps",
+        "c",
+        "F",
+        "omega_ratio",
+        "phase",
+        "backlash",
+        "error_amplitude",
+    ] {
+        assert_eq!(
+            v[k].as_array()
+                .unwrap_or_else(|| panic!("{k} missing"))
+                .len(),
+            10,
+            "{k}"
+        );
+    }
+    let order: Vec<&str> = v["order"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s.as_str().unwrap())
+        .collect();
+    assert_eq!(
+        order,
+        [
+            "x1", "x2", "xsp1", "xsp2", "xsp3", "xsp4", "xrp1", "xrp2", "xrp3", "xrp4"
+        ]
+    );
+    let w: Vec<f64> = v["omega_ratio"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    assert!(
+        (w[0] - 1.0).abs() < 1e-12 && (w[1] - 0.36).abs() < 1e-12 && (w[9] - 0.0875).abs() < 1e-12
+    );
+}
+
+#[test]
+fn frequencies_reproduce_table_2() {
+    let (ok, out, err) = gearwear(&["frequencies", "--shaft-hz", "30"]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert!((v["hz"]["f1"].as_f64().unwrap() - 870.0).abs() < 1e-9);
+    assert!((v["ratio_to_f1"]["f2"].as_f64().unwrap() - 0.3599).abs() < 5e-4);
+    assert!((v["ratio_to_f1"]["f3"].as_f64().unwrap() - 0.0877).abs() < 5e-4);
+}
+
+#[test]
+fn bifurcation_writes_csv_and_plots() {
+    let dir = tmpdir("bif");
+    let csv = dir.join("b.csv");
+    let png = dir.join("b.png");
+    let (ok, _out, err) = gearwear(&[
+        "bifurcation",
+        "--ea",
+        "0.8",
+        "--omega1",
+        "0.2:1.2:0.25",
+        "--periods",
+        "20",
+        "--output",
+        csv.to_str().unwrap(),
+        "--plot",
+        png.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        "omega1,state,lyapunov_per_period,x1,x1_velocity,xrp1,xrp1_velocity"
+    );
+    assert_eq!(lines.count(), 5 * 20);
+    assert!(png.exists() && dir.join("b_xrp1.png").exists());
+    std::fs::remove_dir_all(dir).ok();
+}
+
+#[test]
+fn bad_arguments_get_clear_errors() {
+    let (ok, _, err) = gearwear(&["bifurcation", "--ea", "0.8", "--omega1", "1:0.5:0.1"]);
+    assert!(!ok && err.contains("START"), "{err}");
+    let (ok, _, err) = gearwear(&["simulate", "--omega1=-1", "--ea", "0.5"]);
+    assert!(!ok && err.contains("Ω1"), "{err}");
+    let (ok, _, err) = gearwear(&["simulate", "--omega1", "1", "--ea", "NaN"]);
+    assert!(!ok && err.contains("--ea"), "{err}");
+    let (ok, _, err) = gearwear(&[
+        "simulate",
+        "--omega1",
+        "1",
+        "--ea",
+        "0.5",
+        "--element",
+        "x99",
+    ]);
+    assert!(!ok && err.contains("x99"), "{err}");
+    let (ok, _, err) = gearwear(&["model", "--config", "/nonexistent/rig.toml"]);
+    assert!(!ok && err.contains("/nonexistent/rig.toml"), "{err}");
+}
