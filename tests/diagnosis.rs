@@ -339,8 +339,15 @@ fn precompute_is_deterministic_and_resumes_from_its_partial_file() {
     let kept: Vec<&str> = text.lines().take(2).collect();
     std::fs::write(&partial, kept.join("\n") + "\n").unwrap();
     let b = precompute(&spec, Some(&partial), &|| {}).unwrap();
+    // Equal up to the last bit of a JSON float round trip (the resumed point was read back).
     for (x, y) in a.entries.iter().zip(&b.entries) {
-        assert_eq!(x.samples, y.samples, "deterministic seeds");
+        for (u, v) in x.samples.iter().flatten().zip(y.samples.iter().flatten()) {
+            assert!(
+                (u - v).abs() <= 1e-12 * u.abs().max(1.0),
+                "deterministic seeds"
+            );
+        }
+        assert_eq!(x.motion, y.motion);
     }
     // The table round-trips through its file format.
     let json = a.to_json().unwrap();
