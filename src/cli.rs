@@ -39,6 +39,10 @@ pub enum Command {
     WearLines(WearLinesArgs),
     /// The second seed's 10-DOF space drive (Model B).
     ModelB(crate::model_b_cli::ModelBArgs),
+    /// Simulate the signature table for diagnosis (ea × Ω1 × seeds).
+    Precompute(crate::diagnosis_cli::PrecomputeArgs),
+    /// Estimate the wear degree from an accelerometer record.
+    Diagnose(crate::diagnosis_cli::DiagnoseArgs),
 }
 
 /// Options shared by the simulation commands.
@@ -53,7 +57,7 @@ pub struct RigArgs {
 }
 
 impl RigArgs {
-    fn load(&self) -> Result<ModelAConfig> {
+    pub(crate) fn load(&self) -> Result<ModelAConfig> {
         Ok(match &self.config {
             Some(p) => ModelAConfig::from_file(p)?,
             None => ModelAConfig::default_rig(),
@@ -269,6 +273,8 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Frequencies(a) => frequencies(a),
         Command::WearLines(a) => wear_lines(a),
         Command::ModelB(a) => crate::model_b_cli::run(a),
+        Command::Precompute(a) => crate::diagnosis_cli::precompute_cmd(a),
+        Command::Diagnose(a) => crate::diagnosis_cli::diagnose_cmd(a),
     }
 }
 

@@ -22,11 +22,15 @@
 
 pub mod analysis;
 pub mod cli;
+pub mod diagnosis;
+pub mod diagnosis_cli;
 pub mod error;
 pub mod model;
 pub mod model_b_cli;
 pub mod plot;
+pub mod record;
 pub mod signal;
+pub mod signature;
 pub mod solver;
 
 pub use error::{Error, Result};
