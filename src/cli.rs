@@ -37,6 +37,10 @@ pub enum Command {
     Frequencies(FrequenciesArgs),
     /// Line amplitudes of x̄1 versus wear at one Ω1 (the first seed's Figure 17).
     WearLines(WearLinesArgs),
+    /// Run the wear-diagnosis HTTP service (API v1, dashboard, webhooks).
+    Serve(crate::service::cli::ServeArgs),
+    /// Create, list and revoke the service's API keys.
+    Keys(crate::service::cli::KeysArgs),
 }
 
 /// Options shared by the simulation commands.
@@ -266,6 +270,8 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Model(a) => model_cmd(a),
         Command::Frequencies(a) => frequencies(a),
         Command::WearLines(a) => wear_lines(a),
+        Command::Serve(a) => crate::service::cli::serve_cmd(a),
+        Command::Keys(a) => crate::service::cli::keys_cmd(a),
     }
 }
 

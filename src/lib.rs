@@ -22,10 +22,15 @@
 
 pub mod analysis;
 pub mod cli;
+pub mod configuration;
 pub mod error;
+pub mod keys;
 pub mod model;
 pub mod plot;
+pub mod service;
 pub mod signal;
 pub mod solver;
+pub mod store;
+pub mod telemetry;
 
 pub use error::{Error, Result};
