@@ -41,6 +41,10 @@ pub enum Command {
     Serve(crate::service::cli::ServeArgs),
     /// Create, list and revoke the service's API keys.
     Keys(crate::service::cli::KeysArgs),
+    /// Simulate the signature table for diagnosis (ea × Ω1 × seeds).
+    Precompute(crate::diagnosis_cli::PrecomputeArgs),
+    /// Estimate the wear degree from an accelerometer record.
+    Diagnose(crate::diagnosis_cli::DiagnoseArgs),
 }
 
 /// Options shared by the simulation commands.
@@ -55,7 +59,7 @@ pub struct RigArgs {
 }
 
 impl RigArgs {
-    fn load(&self) -> Result<ModelAConfig> {
+    pub(crate) fn load(&self) -> Result<ModelAConfig> {
         Ok(match &self.config {
             Some(p) => ModelAConfig::from_file(p)?,
             None => ModelAConfig::default_rig(),
@@ -272,6 +276,8 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::WearLines(a) => wear_lines(a),
         Command::Serve(a) => crate::service::cli::serve_cmd(a),
         Command::Keys(a) => crate::service::cli::keys_cmd(a),
+        Command::Precompute(a) => crate::diagnosis_cli::precompute_cmd(a),
+        Command::Diagnose(a) => crate::diagnosis_cli::diagnose_cmd(a),
     }
 }
 

@@ -43,6 +43,63 @@ pub enum Error {
     /// A configuration file could not be parsed.
     #[error("{path}: {reason}")]
     Parse { path: String, reason: String },
+    /// A record file could not be read as the stated format.
+    #[error("record {path}: {reason}")]
+    RecordFormat { path: String, reason: String },
+    /// A record sample is NaN or ±∞.
+    #[error("sample {index} of the record is {value}; the record must contain only finite numbers")]
+    NonFiniteSample { index: usize, value: f64 },
+    /// A record is empty or shorter than the estimator needs.
+    #[error(
+        "the record is too short: {samples} samples = {periods:.1} periods of f1 = {f1_hz:.2} Hz; \
+         the estimator needs at least {needed_periods} periods ({needed_samples} samples)"
+    )]
+    RecordTooShort {
+        samples: usize,
+        periods: f64,
+        f1_hz: f64,
+        needed_periods: usize,
+        needed_samples: usize,
+    },
+    /// The sample rate cannot represent the highest line the estimator needs.
+    #[error(
+        "sample rate {sample_rate} Hz is under twice the highest needed line ({highest_line_hz:.1} Hz): \
+         need more than {needed:.1} Hz"
+    )]
+    SampleRateTooLow {
+        sample_rate: f64,
+        highest_line_hz: f64,
+        needed: f64,
+    },
+    /// No stage-1 mesh line could be located in the record.
+    #[error("no stage-1 mesh line (f1) found between {lo_hz:.1} and {hi_hz:.1} Hz: {reason}")]
+    NoMeshLine {
+        lo_hz: f64,
+        hi_hz: f64,
+        reason: String,
+    },
+    /// The operating speed lies outside the signature table's Ω1 band.
+    #[error(
+        "operating point outside the signature table: f1 = {f1_hz:.2} Hz is Ω1 = {omega1:.4}, \
+         the table covers Ω1 ∈ [{min:.3}, {max:.3}] (f1 ∈ [{min_hz:.1}, {max_hz:.1}] Hz)"
+    )]
+    SpeedOutOfBand {
+        f1_hz: f64,
+        omega1: f64,
+        min: f64,
+        max: f64,
+        min_hz: f64,
+        max_hz: f64,
+    },
+    /// The signature table was computed for another model configuration.
+    #[error(
+        "stale signature table: it was computed for model hash {table_hash}, the current \
+         configuration hashes to {model_hash}; regenerate it with `gearwear precompute`"
+    )]
+    StaleTable {
+        table_hash: String,
+        model_hash: String,
+    },
 }
 
 impl Error {

@@ -20,6 +20,10 @@ use crate::keys::{self, Scope};
 pub struct Caller {
     pub key_id: Option<String>,
     pub scopes: Vec<Scope>,
+    /// Why a presented key was refused; reported by [`Caller::require`], so a handler can
+    /// still drain the request body first (a client mid-upload then reads the 401 instead of
+    /// a reset connection).
+    pub refused: Option<String>,
 }
 
 impl FromRequestParts<AppState> for Caller {
@@ -30,30 +34,36 @@ impl FromRequestParts<AppState> for Caller {
             return Ok(Caller {
                 key_id: None,
                 scopes: vec![],
+                refused: None,
             });
         };
-        let h = h
-            .to_str()
-            .map_err(|_| ApiError::unauthorized("the Authorization header is not ASCII"))?;
-        let token = h
-            .strip_prefix("Bearer ")
-            .or_else(|| h.strip_prefix("bearer "))
-            .ok_or_else(|| {
-                ApiError::unauthorized(
-                    "use `Authorization: Bearer <key>` with a key from `gearwear keys create`",
-                )
-            })?
-            .trim();
-        let invalid =
-            || ApiError::unauthorized("the API key is not valid (unknown, malformed or revoked)");
-        let (id, secret) = keys::split_token(token).ok_or_else(invalid)?;
-        let row = state.store.get_key(id).await?.ok_or_else(invalid)?;
+        let refuse = |why: &str| Caller {
+            key_id: None,
+            scopes: vec![],
+            refused: Some(why.to_string()),
+        };
+        let Some(token) = h.to_str().ok().and_then(|h| {
+            h.strip_prefix("Bearer ")
+                .or_else(|| h.strip_prefix("bearer "))
+        }) else {
+            return Ok(refuse(
+                "use `Authorization: Bearer <key>` with a key from `gearwear keys create`",
+            ));
+        };
+        let invalid = "the API key is not valid (unknown, malformed or revoked)";
+        let Some((id, secret)) = keys::split_token(token.trim()) else {
+            return Ok(refuse(invalid));
+        };
+        let Some(row) = state.store.get_key(id).await? else {
+            return Ok(refuse(invalid));
+        };
         if row.revoked_at.is_some() || !keys::verify(secret, &row.hash) {
-            return Err(invalid());
+            return Ok(refuse(invalid));
         }
         Ok(Caller {
             key_id: Some(row.id),
             scopes: row.scopes,
+            refused: None,
         })
     }
 }
@@ -61,6 +71,9 @@ impl FromRequestParts<AppState> for Caller {
 impl Caller {
     /// Demand a key with `scope`, then charge the key's rate limit.
     pub fn require(&self, state: &AppState, scope: Scope) -> Result<(), ApiError> {
+        if let Some(why) = &self.refused {
+            return Err(ApiError::unauthorized(why.clone()));
+        }
         let Some(id) = &self.key_id else {
             return Err(ApiError::unauthorized(format!(
                 "this request needs an API key with the `{}` scope in `Authorization: Bearer <key>`",
@@ -75,7 +88,7 @@ impl Caller {
 
     /// Reads: a read key, unless the operator opened the dashboard and read endpoints.
     pub fn require_read(&self, state: &AppState) -> Result<(), ApiError> {
-        if state.settings.open_dashboard && self.key_id.is_none() {
+        if state.settings.open_dashboard && self.key_id.is_none() && self.refused.is_none() {
             return state.limiter.charge("anonymous");
         }
         self.require(state, Scope::Read)

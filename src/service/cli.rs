@@ -26,6 +26,9 @@ pub struct ServeArgs {
     /// Signature table (default: the committed `signatures/model_a_accel.json`).
     #[arg(long, env = "GEARWEAR_SIGNATURES")]
     pub signatures: Option<PathBuf>,
+    /// Serve with a signature table computed for another model configuration (logged).
+    #[arg(long)]
+    pub allow_stale_table: bool,
     /// Serve the dashboard and the read endpoints without an API key.
     #[arg(long, env = "GEARWEAR_OPEN_DASHBOARD")]
     pub open_dashboard: bool,
@@ -219,15 +222,16 @@ pub fn redact(url: &str) -> String {
 
 pub fn serve_cmd(a: ServeArgs) -> Result<()> {
     let settings = a.settings()?;
+    let a_allow_stale = a.allow_stale_table;
     crate::telemetry::init(settings.log_json);
     runtime()?.block_on(async move {
-        let diagnoser = super::core::load(&settings.signatures)
-            .with_context(|| format!("loading the signature table {}", settings.signatures.display()))?;
         let store = store::connect(&settings.database_url)
             .await
             .with_context(|| format!("opening the store {}", redact(&settings.database_url)))?;
         check_exposure(&settings.address, store.active_key_count().await?)
             .map_err(anyhow::Error::msg)?;
+        let diagnoser = super::core::load(&settings.signatures, a_allow_stale)
+            .with_context(|| format!("loading the signature table {}", settings.signatures.display()))?;
         let listener = tokio::net::TcpListener::bind(settings.address)
             .await
             .with_context(|| format!("binding {}", settings.address))?;

@@ -242,8 +242,3 @@ async fn retention_task(app: AppState, mut stop: watch::Receiver<bool>) {
         }
     }
 }
-
-/// A plain answer for tests and callers that want a status only.
-pub fn status(code: StatusCode) -> Response {
-    code.into_response()
-}

@@ -224,8 +224,14 @@ pub async fn get_diagnosis(
 ) -> ApiResult<Response> {
     caller.require_read(&app)?;
     let d = app.store.get_diagnosis(&id).await?.ok_or_else(|| {
-        ApiError::not_found("unknown-diagnosis", format!("no diagnosis `{id}`"))
-            .with("diagnosis_id", id.as_str())
+        ApiError::not_found(
+            "unknown-diagnosis",
+            format!(
+                "no diagnosis `{id}`; diagnosis ids are the `id` of a POST …/records answer or \
+                 of an item of GET /v1/machines/{{machine_id}}/diagnoses"
+            ),
+        )
+        .with("diagnosis_id", id.as_str())
     })?;
     let mut body = diagnosis_summary(&d);
     body["diagnosis"] = serde_json::from_str(&d.body).unwrap_or(Value::Null);

@@ -126,19 +126,68 @@ fn body_too_large(limit: usize) -> ApiError {
     .with("limit_bytes", limit as u64)
 }
 
-/// Read the body, refusing more than `limit` bytes (before reading when Content-Length says so).
+/// Read the body, refusing more than `limit` bytes. A refused upload is still read and
+/// discarded (up to 256 MiB or 5 s, nothing kept) before the 413 goes out: a client that is
+/// mid-upload then reads the problem instead of a reset connection ("lingering close").
 pub async fn read_body(headers: &HeaderMap, body: Body, limit: usize) -> ApiResult<bytes_::Bytes> {
-    if let Some(n) = headers
+    use http_body_util::BodyExt;
+    const DRAIN_CAP: usize = 256 << 20;
+    let declared = headers
         .get(header::CONTENT_LENGTH)
         .and_then(|v| v.to_str().ok())
-        .and_then(|s| s.parse::<u64>().ok())
-        && n > limit as u64
-    {
+        .and_then(|s| s.parse::<u64>().ok());
+    let mut too_big = declared.is_some_and(|n| n > limit as u64);
+    let mut buf = Vec::with_capacity(if too_big {
+        0
+    } else {
+        declared.unwrap_or(0).min(limit as u64) as usize
+    });
+    let mut body = body;
+    let mut drained = 0usize;
+    let drain_for = std::time::Duration::from_secs(5);
+    // Only the discarding of a refused upload is time-boxed here; a normal upload is bounded
+    // by the request timeout.
+    let mut deadline = too_big.then(|| tokio::time::Instant::now() + drain_for);
+    loop {
+        let next = match deadline {
+            Some(d) => tokio::time::timeout_at(d, body.frame()).await,
+            None => Ok(body.frame().await),
+        };
+        let frame = match next {
+            Ok(Some(Ok(f))) => f,
+            Ok(None) => break,
+            Ok(Some(Err(e))) => {
+                if too_big {
+                    break;
+                }
+                return Err(ApiError::bad_request(
+                    "body-unreadable",
+                    "Request body could not be read",
+                    format!("the upload broke off: {e}"),
+                ));
+            }
+            Err(_) => break,
+        };
+        let Ok(data) = frame.into_data() else {
+            continue;
+        };
+        if too_big {
+            drained += data.len();
+            if drained > DRAIN_CAP {
+                break;
+            }
+        } else if buf.len() + data.len() > limit {
+            too_big = true;
+            buf = Vec::new();
+            deadline = Some(tokio::time::Instant::now() + drain_for);
+        } else {
+            buf.extend_from_slice(&data);
+        }
+    }
+    if too_big {
         return Err(body_too_large(limit));
     }
-    axum::body::to_bytes(body, limit)
-        .await
-        .map_err(|_| body_too_large(limit))
+    Ok(bytes_::Bytes::from(buf))
 }
 
 mod bytes_ {
@@ -148,34 +197,91 @@ mod bytes_ {
 /// Turn a library error from decoding or diagnosing into a problem.
 pub fn problem_from_error(e: &crate::Error) -> ApiError {
     use crate::Error as E;
+    let un = ApiError::unprocessable;
     match e {
-        E::InvalidParameter {
-            name,
-            value,
-            reason,
-        } => ApiError::unprocessable(
-            "invalid-parameter",
-            "Invalid parameter",
-            format!("`{name}` = {value}: {reason}"),
+        E::RecordFormat { reason, .. } => ApiError::bad_request(
+            "malformed-record",
+            "Malformed record",
+            format!("the body could not be read as the stated format: {reason}"),
+        ),
+        E::NonFiniteSample { index, value } => un(
+            "non-finite-sample",
+            "Non-finite sample",
+            format!(
+                "sample {index} is {value}; every sample must be a finite number (check the \
+                 sensor for dropouts or saturation)"
+            ),
         )
-        .with("parameter", name.as_str()),
-        E::Signal(m) => ApiError::unprocessable("unusable-record", "Unusable record", m.clone()),
-        other => ApiError::unprocessable("unusable-record", "Unusable record", other.to_string()),
+        .with("index", *index as u64),
+        E::RecordTooShort {
+            samples,
+            needed_samples,
+            ..
+        } => un("record-too-short", "Record too short", e.to_string())
+            .with("samples", *samples as u64)
+            .with("needed_samples", *needed_samples as u64),
+        E::SampleRateTooLow { needed, .. } => {
+            un("sample-rate-too-low", "Sample rate too low", e.to_string())
+                .with("needed_hz", *needed)
+        }
+        E::NoMeshLine { .. } => un(
+            "no-mesh-line",
+            "No gear-mesh line found",
+            format!("{e}; give `shaft_hz` if the input-shaft speed is known"),
+        ),
+        E::SpeedOutOfBand { .. } => un(
+            "speed-out-of-band",
+            "Operating speed outside the signature table",
+            e.to_string(),
+        ),
+        E::InvalidParameter { name, .. } => {
+            un("invalid-parameter", "Invalid parameter", e.to_string())
+                .with("parameter", name.as_str())
+        }
+        E::Signal(m) => un("unusable-record", "Unusable record", m.clone()),
+        other => {
+            tracing::error!(error = %other, "diagnosis failed");
+            ApiError::internal(format!("the diagnosis failed: {other}"))
+        }
     }
 }
 
-/// Decode a non-JSON body into samples (the record module's parsers).
+/// Decode a non-JSON body into samples with the record module's parsers (the same as
+/// `gearwear diagnose` uses for files).
 fn decode_binary(
-    _format: BodyFormat,
-    _bytes: &[u8],
-    _sample_rate: Option<f64>,
+    format: BodyFormat,
+    bytes: &[u8],
+    sample_rate: Option<f64>,
 ) -> ApiResult<(Vec<f64>, f64)> {
-    Err(ApiError::new(
-        StatusCode::UNSUPPORTED_MEDIA_TYPE,
-        "unsupported-media-type",
-        "Unsupported content type",
-        "this build decodes application/json records only",
-    ))
+    use crate::record::{Format, ReadOptions, parse_record};
+    let f = match format {
+        BodyFormat::Csv => Format::Csv,
+        BodyFormat::F32 => Format::F32,
+        BodyFormat::Wav => Format::Wav,
+        BodyFormat::Json => unreachable!("JSON is decoded by serde"),
+    };
+    if sample_rate.is_none() && format == BodyFormat::F32 {
+        return Err(ApiError::bad_request(
+            "malformed-record",
+            "Malformed record",
+            "raw f32 samples carry no sample rate: add `?sample_rate_hz=…` to the URL",
+        ));
+    }
+    let opts = ReadOptions {
+        format: Some(f),
+        sample_rate,
+        column: None,
+    };
+    let r = parse_record(bytes, f, &opts, "body").map_err(|e| {
+        let mut p = problem_from_error(&e);
+        // The parsers speak CLI; a web client sets a query parameter.
+        p.detail = p
+            .detail
+            .replace("--sample-rate HZ", "`?sample_rate_hz=…`")
+            .replace("--sample-rate", "`?sample_rate_hz=…`");
+        p
+    })?;
+    Ok((r.samples, r.sample_rate))
 }
 
 fn f32_bytes(x: &[f64]) -> Vec<u8> {
@@ -212,7 +318,12 @@ async fn ingest(
     headers: &HeaderMap,
     body: Body,
 ) -> ApiResult<Response> {
-    caller.require(app, Scope::Ingest)?;
+    let limits = &app.settings.limits;
+    if let Err(e) = caller.require(app, Scope::Ingest) {
+        // Read (and drop) the upload so the client sees the 401/403/429, not a reset.
+        let _ = read_body(headers, body, limits.max_body_bytes).await;
+        return Err(e);
+    }
     check_machine_id(machine_id)?;
     let ct = headers
         .get(header::CONTENT_TYPE)
@@ -242,7 +353,6 @@ async fn ingest(
         serde_urlencoded::from_str(query.as_deref().unwrap_or("")).map_err(|e| {
             ApiError::bad_request("invalid-query", "Invalid query parameter", e.to_string())
         })?;
-    let limits = &app.settings.limits;
     let bytes = read_body(headers, body, limits.max_body_bytes).await?;
 
     // Idempotency: replay the stored answer of an earlier identical request.

@@ -25,6 +25,7 @@
 //!   [`rms`], [`kurtosis`], [`crest_factor`] return `f64` for convenience and give `NaN` for
 //!   unusable input; their `try_*` twins return the explanatory error instead.
 
+pub mod features;
 mod plan;
 mod spectrum;
 mod stats;

@@ -44,8 +44,12 @@ impl Driver {
     }
 
     async fn script(&self, js: &str) -> Value {
-        self.cmd(reqwest::Method::POST, "/execute/sync", Some(json!({"script": js, "args": []})))
-            .await
+        self.cmd(
+            reqwest::Method::POST,
+            "/execute/sync",
+            Some(json!({"script": js, "args": []})),
+        )
+        .await
     }
 
     async fn wait_for(&self, what: &str, js: &str) -> Value {
@@ -55,7 +59,10 @@ impl Driver {
             if !(v.is_null() || v == json!(false)) {
                 return v;
             }
-            assert!(t.elapsed() < Duration::from_secs(20), "the page never showed {what}");
+            assert!(
+                t.elapsed() < Duration::from_secs(20),
+                "the page never showed {what}"
+            );
             tokio::time::sleep(Duration::from_millis(200)).await;
         }
     }
@@ -70,9 +77,10 @@ impl Drop for Driver {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn dashboard_updates_when_a_record_arrives() {
-    let (Some(chromium), Some(chromedriver)) =
-        (find(&["chromium", "chromium-browser"]), find(&["chromedriver"]))
-    else {
+    let (Some(chromium), Some(chromedriver)) = (
+        find(&["chromium", "chromium-browser"]),
+        find(&["chromedriver"]),
+    ) else {
         let msg = "chromium and/or chromedriver not found (apt-get install chromium chromium-driver); the browser test did NOT run";
         if in_ci() {
             panic!("{msg} (CI is set, so this is a failure)");
@@ -83,7 +91,11 @@ async fn dashboard_updates_when_a_record_arrives() {
     let Some(app) = spawn_app(Backend::Sqlite, |s| s.open_dashboard = true).await else {
         return;
     };
-    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
     let child = Command::new(&chromedriver)
         .arg(format!("--port={port}"))
         .stdout(Stdio::null())
@@ -94,10 +106,14 @@ async fn dashboard_updates_when_a_record_arrives() {
     let base = format!("http://127.0.0.1:{port}");
     let t = Instant::now();
     while http.get(format!("{base}/status")).send().await.is_err() {
-        assert!(t.elapsed() < Duration::from_secs(15), "chromedriver did not come up");
+        assert!(
+            t.elapsed() < Duration::from_secs(15),
+            "chromedriver did not come up"
+        );
         tokio::time::sleep(Duration::from_millis(100)).await;
     }
-    let profile = std::env::temp_dir().join(format!("gearwear-chrome-{}", uuid::Uuid::new_v4().simple()));
+    let profile =
+        std::env::temp_dir().join(format!("gearwear-chrome-{}", uuid::Uuid::new_v4().simple()));
     let caps = json!({"capabilities": {"alwaysMatch": {
         "browserName": "chrome",
         "goog:chromeOptions": {
@@ -108,16 +124,46 @@ async fn dashboard_updates_when_a_record_arrives() {
                      format!("--user-data-dir={}", profile.display())]
         }
     }}});
-    let v: Value = http.post(format!("{base}/session")).json(&caps).send().await.unwrap().json().await.unwrap();
-    let session = v["value"]["sessionId"].as_str().unwrap_or_else(|| panic!("no session: {v}")).to_string();
-    let d = Driver { child, base, session, http };
+    let v: Value = http
+        .post(format!("{base}/session"))
+        .json(&caps)
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let session = v["value"]["sessionId"]
+        .as_str()
+        .unwrap_or_else(|| panic!("no session: {v}"))
+        .to_string();
+    let d = Driver {
+        child,
+        base,
+        session,
+        http,
+    };
 
-    d.cmd(reqwest::Method::POST, "/url", Some(json!({"url": app.url("/")}))).await;
-    d.wait_for("its first poll", "return document.getElementById('status').textContent.startsWith('updated')").await;
-    let before = d.script("return document.querySelectorAll('#machines li[data-id]').length").await;
+    d.cmd(
+        reqwest::Method::POST,
+        "/url",
+        Some(json!({"url": app.url("/")})),
+    )
+    .await;
+    d.wait_for(
+        "its first poll",
+        "return document.getElementById('status').textContent.startsWith('updated')",
+    )
+    .await;
+    let before = d
+        .script("return document.querySelectorAll('#machines li[data-id]').length")
+        .await;
     assert_eq!(before, json!(0));
 
-    assert_eq!(app.post_json("gearbox-1", &json_record(3)).await.status(), 201);
+    assert_eq!(
+        app.post_json("gearbox-1", &json_record(3)).await.status(),
+        201
+    );
     let est = d
         .wait_for(
             "the new machine and its wear estimate",
@@ -127,26 +173,54 @@ async fn dashboard_updates_when_a_record_arrives() {
         )
         .await;
     let est: f64 = est.as_str().unwrap().parse().unwrap();
-    let api = json(&app.get("/v1/machines/gearbox-1").await.bytes().await.unwrap());
+    let api = json(
+        &app.get("/v1/machines/gearbox-1")
+            .await
+            .bytes()
+            .await
+            .unwrap(),
+    );
     assert!((api["latest"]["wear_degree"]["estimate"].as_f64().unwrap() - est).abs() < 1e-3);
     let marks = d
         .wait_for("the spectrum marks", "const n = document.querySelectorAll('#spectrum .mark').length; return n > 0 ? n : null")
         .await;
     assert!(marks.as_u64().unwrap() >= 3);
-    let names = d.script("return [...document.querySelectorAll('#spectrum .mark')].map(m => m.dataset.name)").await;
+    let names = d
+        .script("return [...document.querySelectorAll('#spectrum .mark')].map(m => m.dataset.name)")
+        .await;
     for n in ["f1", "f2", "f3"] {
-        assert!(names.as_array().unwrap().contains(&json!(n)), "{n} marked: {names}");
+        assert!(
+            names.as_array().unwrap().contains(&json!(n)),
+            "{n} marked: {names}"
+        );
     }
-    assert_eq!(d.script("return document.querySelectorAll('#trend .trend-point').length").await, json!(1));
-    let level = d.script("return document.querySelector('#machines li[data-id=\"gearbox-1\"] .dot').className").await;
+    assert_eq!(
+        d.script("return document.querySelectorAll('#trend .trend-point').length")
+            .await,
+        json!(1)
+    );
+    let level = d
+        .script(
+            "return document.querySelector('#machines li[data-id=\"gearbox-1\"] .dot').className",
+        )
+        .await;
     assert!(level.as_str().unwrap().starts_with("dot "), "{level}");
 
     // A second record: the trend grows without a reload.
-    assert_eq!(app.post_json("gearbox-1", &json_record(4)).await.status(), 201);
-    d.wait_for("the second trend point", "return document.querySelectorAll('#trend .trend-point').length === 2").await;
+    assert_eq!(
+        app.post_json("gearbox-1", &json_record(4)).await.status(),
+        201
+    );
+    d.wait_for(
+        "the second trend point",
+        "return document.querySelectorAll('#trend .trend-point').length === 2",
+    )
+    .await;
 
     let png = d.cmd(reqwest::Method::GET, "/screenshot", None).await;
-    let png = base64::engine::general_purpose::STANDARD.decode(png.as_str().unwrap()).unwrap();
+    let png = base64::engine::general_purpose::STANDARD
+        .decode(png.as_str().unwrap())
+        .unwrap();
     let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("dashboard.png");
     std::fs::write(&out, png).unwrap();
     eprintln!("dashboard screenshot: {}", out.display());

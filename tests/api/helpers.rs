@@ -34,7 +34,7 @@ pub fn diagnoser() -> Arc<TableDiagnoser> {
     static D: OnceLock<Arc<TableDiagnoser>> = OnceLock::new();
     D.get_or_init(|| {
         Arc::new(
-            gearwear::service::core::load(&gearwear::configuration::default_signatures())
+            gearwear::service::core::load(&gearwear::configuration::default_signatures(), true)
                 .expect("the committed signature table loads"),
         )
     })
@@ -150,8 +150,10 @@ pub struct TestApp {
 
 /// Settings for tests: fast webhook retries, generous rate limits.
 pub fn test_settings() -> Settings {
-    let mut s = Settings::default();
-    s.address = "127.0.0.1:0".parse().unwrap();
+    let mut s = Settings {
+        address: "127.0.0.1:0".parse().unwrap(),
+        ..Default::default()
+    };
     s.webhooks.base_backoff = std::time::Duration::from_millis(100);
     s.webhooks.max_backoff = std::time::Duration::from_millis(400);
     s.webhooks.poll_interval = std::time::Duration::from_millis(50);
@@ -189,7 +191,9 @@ pub async fn spawn_app(backend: Backend, tweak: impl FnOnce(&mut Settings)) -> O
 }
 
 async fn start(settings: Settings, store: Arc<dyn Store>) -> TestApp {
-    let listener = tokio::net::TcpListener::bind(settings.address).await.unwrap();
+    let listener = tokio::net::TcpListener::bind(settings.address)
+        .await
+        .unwrap();
     let addr = format!("http://{}", listener.local_addr().unwrap());
     let state = AppState::new(settings.clone(), store.clone(), diagnoser());
     let (tx, rx) = oneshot::channel::<()>();
@@ -311,11 +315,13 @@ pub fn spec() -> &'static Value {
 }
 
 /// Resolve a local `$ref`.
-fn deref<'a>(v: &'a Value) -> &'a Value {
+fn deref(v: &Value) -> &Value {
     match v.get("$ref").and_then(|r| r.as_str()) {
         Some(r) => {
             let ptr = r.trim_start_matches('#');
-            spec().pointer(ptr).unwrap_or_else(|| panic!("dangling $ref {r}"))
+            spec()
+                .pointer(ptr)
+                .unwrap_or_else(|| panic!("dangling $ref {r}"))
         }
         None => v,
     }
@@ -334,12 +340,18 @@ pub fn check_response(method: &str, template: &str, status: u16, content_type: &
     });
     let resp = deref(resp);
     let Some(content) = resp.get("content").and_then(|c| c.as_object()) else {
-        assert!(body.is_empty(), "{method} {template} {status}: body where the spec has none");
+        assert!(
+            body.is_empty(),
+            "{method} {template} {status}: body where the spec has none"
+        );
         return;
     };
     let mime = content_type.split(';').next().unwrap_or("").trim();
     let media = content.get(mime).unwrap_or_else(|| {
-        panic!("{method} {template} {status}: content type {mime} not in the spec ({:?})", content.keys().collect::<Vec<_>>())
+        panic!(
+            "{method} {template} {status}: content type {mime} not in the spec ({:?})",
+            content.keys().collect::<Vec<_>>()
+        )
     });
     if !mime.ends_with("json") {
         return;
@@ -380,7 +392,8 @@ pub async fn checked(
 }
 
 pub fn json(body: &[u8]) -> Value {
-    serde_json::from_slice(body).unwrap_or_else(|e| panic!("not JSON ({e}): {}", String::from_utf8_lossy(body)))
+    serde_json::from_slice(body)
+        .unwrap_or_else(|e| panic!("not JSON ({e}): {}", String::from_utf8_lossy(body)))
 }
 
 /// Run one async test body against both stores.

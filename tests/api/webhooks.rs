@@ -21,7 +21,10 @@ struct Receiver {
     fail_first: Arc<Mutex<usize>>,
 }
 
-async fn start_receiver(fail_first: usize, port: u16) -> (Receiver, String, tokio::task::JoinHandle<()>) {
+async fn start_receiver(
+    fail_first: usize,
+    port: u16,
+) -> (Receiver, String, tokio::task::JoinHandle<()>) {
     let rx = Receiver {
         got: Default::default(),
         fail_first: Arc::new(Mutex::new(fail_first)),
@@ -42,7 +45,9 @@ async fn start_receiver(fail_first: usize, port: u16) -> (Receiver, String, toki
             }
         }),
     );
-    let l = tokio::net::TcpListener::bind(("127.0.0.1", port)).await.unwrap();
+    let l = tokio::net::TcpListener::bind(("127.0.0.1", port))
+        .await
+        .unwrap();
     let url = format!("http://{}/hook", l.local_addr().unwrap());
     let task = tokio::spawn(async move {
         axum::serve(l, app).await.unwrap();
@@ -86,13 +91,18 @@ async fn signed_delivery_with_retries(b: Backend) {
     let secret = hook["secret"].as_str().unwrap().to_string();
     let id = hook["id"].as_str().unwrap().to_string();
     let (s, _, body) = checked(
-        app.client.get(app.url("/v1/webhooks")).bearer_auth(&app.admin_key),
+        app.client
+            .get(app.url("/v1/webhooks"))
+            .bearer_auth(&app.admin_key),
         "GET",
         "/v1/webhooks",
     )
     .await;
     assert_eq!(s, 200);
-    assert!(!String::from_utf8_lossy(&body).contains(&secret), "the secret is shown once");
+    assert!(
+        !String::from_utf8_lossy(&body).contains(&secret),
+        "the secret is shown once"
+    );
 
     assert_eq!(app.post_json("m-hook", &json_record(1)).await.status(), 201);
     wait_for("two deliveries", || rx.got.lock().unwrap().len() >= 2).await;
@@ -103,10 +113,16 @@ async fn signed_delivery_with_retries(b: Backend) {
         let sig = h["gearwear-signature"].to_str().unwrap();
         let (t, v1) = sig.split_once(',').unwrap();
         let t: i64 = t.strip_prefix("t=").unwrap().parse().unwrap();
-        assert_eq!(v1.strip_prefix("v1=").unwrap(), gearwear::keys::webhook_mac(&secret, t, body));
+        assert_eq!(
+            v1.strip_prefix("v1=").unwrap(),
+            gearwear::keys::webhook_mac(&secret, t, body)
+        );
         let p: Value = serde_json::from_slice(body).unwrap();
         assert_eq!(p["machine_id"], "m-hook");
-        assert_eq!(h["gearwear-event"].to_str().unwrap(), p["event"].as_str().unwrap());
+        assert_eq!(
+            h["gearwear-event"].to_str().unwrap(),
+            p["event"].as_str().unwrap()
+        );
         events.push(p["event"].as_str().unwrap().to_string());
     }
     events.sort();
@@ -125,13 +141,20 @@ async fn signed_delivery_with_retries(b: Backend) {
     let log = json(&body);
     let ds = log["deliveries"].as_array().unwrap();
     assert_eq!(ds.len(), 2);
-    let attempts: usize = ds.iter().map(|d| d["attempts"].as_array().unwrap().len()).sum();
+    let attempts: usize = ds
+        .iter()
+        .map(|d| d["attempts"].as_array().unwrap().len())
+        .sum();
     assert_eq!(attempts, 4, "2 failures + 2 successes: {log:#}");
     assert!(ds.iter().all(|d| d["status"] == "delivered"));
     assert!(ds.iter().any(|d| d["attempts"][0]["status_code"] == 500));
 
     // Delete: 204, then 404.
-    let del = || app.client.delete(app.url(&format!("/v1/webhooks/{id}"))).bearer_auth(&app.admin_key);
+    let del = || {
+        app.client
+            .delete(app.url(&format!("/v1/webhooks/{id}")))
+            .bearer_auth(&app.admin_key)
+    };
     let (s, _, _) = checked(del(), "DELETE", "/v1/webhooks/{webhook_id}").await;
     assert_eq!(s, 204);
     let (s, _, _) = checked(del(), "DELETE", "/v1/webhooks/{webhook_id}").await;
@@ -149,7 +172,9 @@ async fn signed_delivery_with_retries(b: Backend) {
 }
 
 async fn deliveries_survive_a_restart(b: Backend) {
-    let Some(mut app) = spawn_app(b, |_| {}).await else { return };
+    let Some(mut app) = spawn_app(b, |_| {}).await else {
+        return;
+    };
     // A port nobody listens on yet.
     let port = {
         let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
@@ -157,12 +182,18 @@ async fn deliveries_survive_a_restart(b: Backend) {
     };
     let url = format!("http://127.0.0.1:{port}/hook");
     create_hook(&app, &url).await;
-    assert_eq!(app.post_json("m-restart", &json_record(1)).await.status(), 201);
+    assert_eq!(
+        app.post_json("m-restart", &json_record(1)).await.status(),
+        201
+    );
     // Let it fail at least once, then stop the service with the delivery pending.
     tokio::time::sleep(std::time::Duration::from_millis(300)).await;
     app.restart(|_| {}).await;
     let (rx, _, _t) = start_receiver(0, port).await;
-    wait_for("the delivery after the restart", || !rx.got.lock().unwrap().is_empty()).await;
+    wait_for("the delivery after the restart", || {
+        !rx.got.lock().unwrap().is_empty()
+    })
+    .await;
     let p: Value = serde_json::from_slice(&rx.got.lock().unwrap()[0].1).unwrap();
     assert_eq!(p["event"], "diagnosis.created");
     assert_eq!(p["machine_id"], "m-restart");

@@ -1,0 +1,1025 @@
+//! Diagnosis: from one accelerometer record to a wear degree with a credible interval.
+//!
+//! Steps of [`diagnose`]:
+//! 1. **Validate** the record (non-empty, finite, a usable sample rate).
+//! 2. **Locate f1** (stage-1 mesh frequency, Hz). With a shaft rate: `f1 = z1 × shaft_hz`
+//!    (29 × on the paper's rig), refined to the spectral peak within ±0.3 %. Without
+//!    (tacho-less): every prominent peak of the record's spectrum inside the table's speed band
+//!    is scored by its own prominence plus the prominence of its kinematic partners
+//!    (`f2 = 0.36 f1`, `2f2`, `f1 − f2`, `f3 = 0.0875 f1`, `f1 + f2`, `2 f1`); the best
+//!    candidate wins and is refined to the maximum of the record's Hann DTFT. `Ω1 = f1 / f_ref`.
+//! 3. **Measure** the model's lines and the gain-invariant features
+//!    ([`crate::signature::measure_lines`]; the same code made the table).
+//! 4. **Match**: a Gaussian likelihood in the clipped log-ratio features with the table's
+//!    per-grid-point mean and spread plus a measurement floor, bilinearly interpolated in
+//!    `(ea, Ω1)`, tempered, marginalised over `Ω1` with a narrow Gaussian prior around the
+//!    measured value; uniform prior on `ea` over the table's range. The posterior gives the
+//!    estimate (median), the 90 % credible interval (5 % and 95 % quantiles), the motion state
+//!    the table expects there and the nearest table entries.
+//! 5. **Planetary flag**: the z-score of the measured `ln(A_f3/A_f1)` against what the table
+//!    (planetary error 0.1) expects at the estimate; above `planetary_z` → elevated.
+//! 6. **Condition indicators** (RMS, kurtosis, crest factor, FM0, FM4, NA4; tacho-less, see
+//!    [`crate::signal::features`]).
+//! 7. **Baseline** (the paper's method): the single ratio `A_f2/A_f1` matched to the table's
+//!    mean curve at the measured Ω1; reported for comparison.
+
+use serde::Serialize;
+
+use crate::error::{Error, Result};
+use crate::model::Frequencies;
+use crate::record::Record;
+use crate::signal::features::{ConditionIndicators, condition_indicators};
+use crate::signal::{Window, amplitude_spectrum, welch};
+use crate::signature::{
+    LineDef, LineMeasurement, SEGMENT_PERIODS, SignatureTable, highest_ratio, measure_lines,
+    segment_len,
+};
+
+/// Tuning of [`diagnose`]. The defaults are the calibrated values documented in
+/// `docs/diagnosis.md`.
+#[derive(Debug, Clone, Serialize)]
+pub struct DiagnoseOptions {
+    /// Input (motor) shaft rate in Hz; `None`: find f1 in the spectrum.
+    pub shaft_hz: Option<f64>,
+    /// Credible level of the interval (0.9 → 5 % … 95 %).
+    pub credible_level: f64,
+    /// Standard deviation of the Gaussian prior on Ω1 around the measured value (absorbs the
+    /// model's speed calibration; the measured f1 itself is far more precise).
+    pub omega1_sigma: f64,
+    /// Floor (dB re the f1 line) below which line ratios are clipped, in both the record and
+    /// the table: lines under it are treated as "absent" (noise decides their level).
+    pub floor_db: f64,
+    /// Measurement-noise floor of every feature (natural-log units), added in quadrature to
+    /// the table's spread.
+    pub feature_sigma: f64,
+    /// Likelihood temperature (≥ 1 flattens an over-confident product of correlated features).
+    pub temperature: f64,
+    /// z-score of the f3 line above which the planetary clearance is flagged as elevated.
+    pub planetary_z: f64,
+    /// Step of the fine ea grid of the posterior.
+    pub ea_step: f64,
+    /// Goodness-of-fit warning threshold on χ² per feature (see [`Fit`]).
+    pub max_chi2_per_feature: f64,
+}
+
+impl Default for DiagnoseOptions {
+    fn default() -> Self {
+        DiagnoseOptions {
+            shaft_hz: None,
+            credible_level: 0.9,
+            omega1_sigma: 0.01,
+            floor_db: -40.0,
+            feature_sigma: 0.25,
+            temperature: 1.0,
+            planetary_z: 3.0,
+            ea_step: 0.0025,
+            max_chi2_per_feature: 5.0,
+        }
+    }
+}
+
+/// The wear estimate.
+#[derive(Debug, Clone, Serialize)]
+pub struct WearDegree {
+    /// Posterior median of ea (units of b = 5 µm).
+    pub estimate: f64,
+    /// Lower end of the credible interval.
+    pub lower: f64,
+    /// Upper end.
+    pub upper: f64,
+    /// Credible level of `[lower, upper]`.
+    pub level: f64,
+    /// Posterior mode.
+    pub mode: f64,
+}
+
+/// How f1 was found.
+#[derive(Debug, Clone, Serialize)]
+pub struct F1Detection {
+    /// `shaft-speed` or `spectrum` (tacho-less).
+    pub method: &'static str,
+    /// Starting value before refinement (Hz).
+    pub initial_hz: f64,
+    /// Prominence of the f1 peak over the local spectral floor (dB).
+    pub prominence_db: f64,
+    /// Kinematic partner lines seen at ≥ 6 dB over the floor, by name.
+    pub partners_found: Vec<String>,
+    /// Score of the chosen candidate (tacho-less) and of the runner-up.
+    pub score: f64,
+    pub runner_up_hz: Option<f64>,
+    pub runner_up_score: Option<f64>,
+    /// Best candidates `(Hz, score, partners found)` of the tacho-less search.
+    pub candidates: Vec<(f64, f64, Vec<String>)>,
+}
+
+/// One measured line.
+#[derive(Debug, Clone, Serialize)]
+pub struct MatchedLine {
+    pub name: String,
+    /// Frequency over f1.
+    pub normalised_frequency: f64,
+    pub frequency_hz: f64,
+    /// Peak amplitude (unit of the record).
+    pub amplitude: f64,
+    /// 20 log10(A / A_f1).
+    pub level_db: f64,
+    /// What the table expects at the estimate (dB re f1, after clipping), and its spread.
+    pub expected_db: Option<f64>,
+    pub expected_std_db: Option<f64>,
+}
+
+/// A table entry near the answer.
+#[derive(Debug, Clone, Serialize)]
+pub struct NearEntry {
+    pub ea: f64,
+    pub omega1: f64,
+    /// Log-likelihood of the record at this entry (tempered).
+    pub log_likelihood: f64,
+    pub motion_state: String,
+}
+
+/// The planetary-stage check.
+#[derive(Debug, Clone, Serialize)]
+pub struct PlanetaryCheck {
+    /// Measured ln(A_f3/A_f1) after clipping.
+    pub f3_log_ratio: f64,
+    /// Expected at the estimate with planetary error 0.1, and the combined spread.
+    pub expected: f64,
+    pub sigma: f64,
+    pub z: f64,
+    pub threshold: f64,
+}
+
+/// The paper's single-ratio method.
+#[derive(Debug, Clone, Serialize)]
+pub struct Baseline {
+    pub method: &'static str,
+    pub ea: f64,
+}
+
+/// How well the best table point explains the record.
+#[derive(Debug, Clone, Serialize)]
+pub struct Fit {
+    /// `Σ_d (y_d − μ_d)² / (σ_d² + feature_sigma²)` over the wear features at (mode, Ω1).
+    pub chi2: f64,
+    /// Number of features in the sum.
+    pub features: usize,
+    /// `chi2 / features`; ≈ 1 for a record the model explains. Above
+    /// [`DiagnoseOptions::max_chi2_per_feature`] a warning says the record does not look like
+    /// this model's output (another gearbox, another sensor position, a fault the model lacks).
+    pub chi2_per_feature: f64,
+    /// True when the fit was poor and the likelihood was flattened by `chi2_per_feature`.
+    pub inflated: bool,
+}
+
+fn fit_is_poor(chi2_per_feature: f64, opts: &DiagnoseOptions) -> bool {
+    chi2_per_feature.is_nan() || chi2_per_feature > opts.max_chi2_per_feature
+}
+
+/// Record facts.
+#[derive(Debug, Clone, Serialize)]
+pub struct RecordInfo {
+    pub samples: usize,
+    pub sample_rate_hz: f64,
+    pub duration_s: f64,
+    pub f1_periods: f64,
+    pub welch_segments: usize,
+    pub segment_len: usize,
+}
+
+/// The answer of [`diagnose`] (also the JSON of `gearwear diagnose`).
+#[derive(Debug, Clone, Serialize)]
+pub struct Diagnosis {
+    pub wear_degree: WearDegree,
+    /// Stage-1 mesh frequency (Hz).
+    pub f1_hz: f64,
+    /// Input-shaft rate implied by f1 (Hz), `f1 / z1`.
+    pub shaft_hz: f64,
+    /// Ω1 = f1 / f_ref of the measured f1.
+    pub omega1: f64,
+    /// Posterior mean of Ω1.
+    pub omega1_posterior: f64,
+    pub f1_detection: F1Detection,
+    /// Motion state of x1 the table expects at (estimate, Ω1).
+    pub motion_state: String,
+    /// Share of the table's seeds in that state at the nearest entry.
+    pub motion_state_share: f64,
+    pub planetary_clearance_elevated: bool,
+    pub planetary: PlanetaryCheck,
+    pub lines: Vec<MatchedLine>,
+    pub condition_indicators: ConditionIndicators,
+    pub nearest_entries: Vec<NearEntry>,
+    /// Posterior density over ea on a 0.01 grid: `(ea, density)`.
+    pub posterior: Vec<(f64, f64)>,
+    pub baseline_single_ratio: Baseline,
+    pub fit: Fit,
+    pub record: RecordInfo,
+    /// Table identity.
+    pub table_model_hash: String,
+    pub sensor: String,
+    pub warnings: Vec<String>,
+}
+
+/// Per-entry statistics of the clipped features.
+#[derive(Debug, Clone)]
+pub struct Matcher {
+    /// Feature indices used for ea.
+    wear_features: Vec<usize>,
+    f2_feature: usize,
+    f3_feature: usize,
+    /// mean and variance per entry per feature (entry-major).
+    mean: Vec<Vec<f64>>,
+    var: Vec<Vec<f64>>,
+    floor: f64,
+    n_ea: usize,
+    n_om: usize,
+    ea: Vec<f64>,
+    om: Vec<f64>,
+}
+
+/// Feature index of a line (features skip f1).
+fn feature_index(lines: &[LineDef], name: &str) -> Option<usize> {
+    let i1 = lines.iter().position(|l| l.name == "f1")?;
+    let i = lines.iter().position(|l| l.name == name)?;
+    if i == i1 {
+        None
+    } else if i < i1 {
+        Some(i)
+    } else {
+        Some(i - 1)
+    }
+}
+
+impl Matcher {
+    /// Precompute the clipped statistics of a table.
+    pub fn new(table: &SignatureTable, opts: &DiagnoseOptions) -> Result<Self> {
+        let lines = &table.features.lines;
+        let nf = table.features.names.len();
+        let floor = opts.floor_db * std::f64::consts::LN_10 / 20.0;
+        let mut wear_features = Vec::new();
+        for (k, l) in lines.iter().filter(|l| l.name != "f1").enumerate() {
+            if !l.planetary {
+                wear_features.push(k);
+            }
+        }
+        wear_features.push(nf - 1); // f1_power_fraction
+        let missing = |n: &str| Error::InvalidConfig(format!("the table has no `{n}` line"));
+        let f2_feature = feature_index(lines, "f2").ok_or_else(|| missing("f2"))?;
+        let f3_feature = feature_index(lines, "f3").ok_or_else(|| missing("f3"))?;
+        let mut mean = Vec::with_capacity(table.entries.len());
+        let mut var = Vec::with_capacity(table.entries.len());
+        for e in &table.entries {
+            let n = e.samples.len() as f64;
+            let mut m = vec![0.0; nf];
+            let mut v = vec![0.0; nf];
+            for s in &e.samples {
+                for d in 0..nf {
+                    m[d] += s[d].max(floor);
+                }
+            }
+            for x in m.iter_mut() {
+                *x /= n;
+            }
+            for s in &e.samples {
+                for d in 0..nf {
+                    v[d] += (s[d].max(floor) - m[d]).powi(2);
+                }
+            }
+            for x in v.iter_mut() {
+                // Unbiased; one seed gives no spread.
+                *x /= (n - 1.0).max(1.0);
+            }
+            mean.push(m);
+            var.push(v);
+        }
+        Ok(Matcher {
+            wear_features,
+            f2_feature,
+            f3_feature,
+            mean,
+            var,
+            floor,
+            n_ea: table.grid.ea.len(),
+            n_om: table.grid.omega1.len(),
+            ea: table.grid.ea.clone(),
+            om: table.grid.omega1.clone(),
+        })
+    }
+
+    /// Clip a measured feature vector at the floor.
+    pub fn clip(&self, y: &[f64]) -> Vec<f64> {
+        y.iter().map(|v| v.max(self.floor)).collect()
+    }
+
+    /// Bracketing index and weight of `v` on an ascending axis (clamped).
+    fn bracket(axis: &[f64], v: f64) -> (usize, f64) {
+        if axis.len() == 1 || v <= axis[0] {
+            return (0, 0.0);
+        }
+        let last = axis.len() - 1;
+        if v >= axis[last] {
+            return (last - 1, 1.0);
+        }
+        let i = axis.partition_point(|&a| a <= v) - 1;
+        (i, (v - axis[i]) / (axis[i + 1] - axis[i]))
+    }
+
+    /// Bilinear mean and variance of feature `d` at `(ea, Ω1)`.
+    pub fn stats_at(&self, d: usize, ea: f64, om: f64) -> (f64, f64) {
+        let (i, u) = Self::bracket(&self.ea, ea);
+        let (j, w) = if self.n_om > 1 {
+            Self::bracket(&self.om, om)
+        } else {
+            (0, 0.0)
+        };
+        let j1 = (j + 1).min(self.n_om - 1);
+        let i1 = (i + 1).min(self.n_ea - 1);
+        let at = |a: usize, b: usize| a * self.n_om + b;
+        let mut m = 0.0;
+        let mut v = 0.0;
+        for (idx, wt) in [
+            (at(i, j), (1.0 - u) * (1.0 - w)),
+            (at(i1, j), u * (1.0 - w)),
+            (at(i, j1), (1.0 - u) * w),
+            (at(i1, j1), u * w),
+        ] {
+            m += wt * self.mean[idx][d];
+            v += wt * self.var[idx][d];
+        }
+        (m, v)
+    }
+
+    /// Tempered log-likelihood of the clipped features `y` at `(ea, Ω1)`.
+    pub fn log_likelihood(&self, y: &[f64], ea: f64, om: f64, opts: &DiagnoseOptions) -> f64 {
+        let s0 = opts.feature_sigma * opts.feature_sigma;
+        let mut ll = 0.0;
+        for &d in &self.wear_features {
+            let (m, v) = self.stats_at(d, ea, om);
+            let var = v + s0;
+            ll += -0.5 * (y[d] - m).powi(2) / var - 0.5 * var.ln();
+        }
+        ll / opts.temperature.max(1e-9)
+    }
+
+    /// χ² of the clipped features `y` at `(ea, Ω1)` and the number of features in it.
+    pub fn chi2(&self, y: &[f64], ea: f64, om: f64, opts: &DiagnoseOptions) -> (f64, usize) {
+        let s0 = opts.feature_sigma * opts.feature_sigma;
+        let c = self
+            .wear_features
+            .iter()
+            .map(|&d| {
+                let (m, v) = self.stats_at(d, ea, om);
+                (y[d] - m).powi(2) / (v + s0)
+            })
+            .sum();
+        (c, self.wear_features.len())
+    }
+
+    /// Log-likelihood at a grid entry (no interpolation).
+    fn entry_log_likelihood(&self, y: &[f64], k: usize, opts: &DiagnoseOptions) -> f64 {
+        let s0 = opts.feature_sigma * opts.feature_sigma;
+        let mut ll = 0.0;
+        for &d in &self.wear_features {
+            let var = self.var[k][d] + s0;
+            ll += -0.5 * (y[d] - self.mean[k][d]).powi(2) / var - 0.5 * var.ln();
+        }
+        ll / opts.temperature.max(1e-9)
+    }
+
+    /// The paper's single-ratio estimate: the ea whose table mean of ln(A_f2/A_f1) at Ω1 is
+    /// closest to the measured one.
+    pub fn baseline(&self, y: &[f64], om: f64, step: f64) -> f64 {
+        let (lo, hi) = (self.ea[0], self.ea[self.n_ea - 1]);
+        let n = ((hi - lo) / step).round() as usize;
+        let mut best = (f64::INFINITY, lo);
+        for k in 0..=n {
+            let ea = lo + k as f64 * step;
+            let (m, _) = self.stats_at(self.f2_feature, ea, om);
+            let d = (y[self.f2_feature] - m).abs();
+            if d < best.0 {
+                best = (d, ea);
+            }
+        }
+        best.1
+    }
+}
+
+/// Posterior over ea.
+#[derive(Debug, Clone)]
+pub struct Posterior {
+    pub ea: Vec<f64>,
+    /// Normalised to sum 1.
+    pub p: Vec<f64>,
+    pub omega_mean: f64,
+}
+
+impl Posterior {
+    /// Quantile `q` (linear within a grid cell).
+    pub fn quantile(&self, q: f64) -> f64 {
+        let mut c = 0.0;
+        for (k, p) in self.p.iter().enumerate() {
+            if c + p >= q {
+                let frac = if *p > 0.0 { (q - c) / p } else { 0.0 };
+                let step = if self.ea.len() > 1 {
+                    self.ea[1] - self.ea[0]
+                } else {
+                    0.0
+                };
+                return (self.ea[k] - 0.5 * step + frac * step)
+                    .clamp(self.ea[0], self.ea[self.ea.len() - 1]);
+            }
+            c += p;
+        }
+        self.ea[self.ea.len() - 1]
+    }
+    /// Mode.
+    pub fn mode(&self) -> f64 {
+        let k = self
+            .p
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(k, _)| k)
+            .unwrap_or(0);
+        self.ea[k]
+    }
+}
+
+/// Posterior of ea given clipped features `y` and the measured Ω1.
+pub fn posterior(m: &Matcher, y: &[f64], omega1: f64, opts: &DiagnoseOptions) -> Posterior {
+    let (lo, hi) = (m.ea[0], m.ea[m.n_ea - 1]);
+    let step = opts.ea_step.max(1e-4);
+    let n = ((hi - lo) / step).round() as usize + 1;
+    let ea: Vec<f64> = (0..n).map(|k| (lo + k as f64 * step).min(hi)).collect();
+    let (olo, ohi) = (m.om[0], m.om[m.n_om - 1]);
+    let sig = opts.omega1_sigma.max(0.0);
+    let oms: Vec<(f64, f64)> = if sig == 0.0 || m.n_om == 1 {
+        vec![(omega1.clamp(olo, ohi), 1.0)]
+    } else {
+        (-4..=4)
+            .map(|k| {
+                let z = k as f64 * 0.6;
+                ((omega1 + z * sig).clamp(olo, ohi), (-0.5 * z * z).exp())
+            })
+            .collect()
+    };
+    let mut ll = vec![vec![0.0; oms.len()]; n];
+    let mut max = f64::NEG_INFINITY;
+    for (k, &e) in ea.iter().enumerate() {
+        for (j, &(o, w)) in oms.iter().enumerate() {
+            let v = m.log_likelihood(y, e, o, opts) + w.ln();
+            ll[k][j] = v;
+            max = max.max(v);
+        }
+    }
+    let mut p = vec![0.0; n];
+    let mut om_acc = 0.0;
+    for k in 0..n {
+        for (j, &(o, _)) in oms.iter().enumerate() {
+            let v = (ll[k][j] - max).exp();
+            p[k] += v;
+            om_acc += v * o;
+        }
+    }
+    let total: f64 = p.iter().sum();
+    let (p, omega_mean) = if total > 0.0 && total.is_finite() {
+        (p.iter().map(|v| v / total).collect(), om_acc / total)
+    } else {
+        (vec![1.0 / n as f64; n], omega1)
+    };
+    Posterior { ea, p, omega_mean }
+}
+
+/// Local spectral floor: running median of `amp` over ±`half` bins, evaluated every `stride`
+/// bins and interpolated.
+fn local_floor(amp: &[f64], half: usize, stride: usize) -> Vec<f64> {
+    let n = amp.len();
+    let mut centres = Vec::new();
+    let mut values = Vec::new();
+    let mut buf = Vec::with_capacity(2 * half + 1);
+    let mut c = 0;
+    while c < n {
+        let lo = c.saturating_sub(half);
+        let hi = (c + half + 1).min(n);
+        buf.clear();
+        buf.extend_from_slice(&amp[lo..hi]);
+        let mid = buf.len() / 2;
+        buf.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+        centres.push(c);
+        values.push(buf[mid].max(1e-300));
+        c += stride;
+    }
+    let mut out = vec![0.0; n];
+    for (k, o) in out.iter_mut().enumerate() {
+        let i = (k / stride).min(centres.len() - 1);
+        let i1 = (i + 1).min(centres.len() - 1);
+        let t = if i1 > i {
+            (k - centres[i]) as f64 / (centres[i1] - centres[i]) as f64
+        } else {
+            0.0
+        };
+        *o = values[i] * (1.0 - t) + values[i1] * t;
+    }
+    out
+}
+
+/// Hann-windowed DTFT magnitude of the whole record at `f` (Hz): a smooth peak to refine on.
+fn dtft_mag(x: &[f64], fs: f64, f: f64, w: &[f64]) -> f64 {
+    let cyc = f / fs;
+    let rot = (std::f64::consts::TAU * cyc).sin_cos();
+    let (mut re, mut im) = (0.0, 0.0);
+    let mut z = (1.0, 0.0); // (cos, sin)
+    for (i, (xv, wv)) in x.iter().zip(w).enumerate() {
+        if i % 1024 == 0 {
+            let ph = (cyc * i as f64).fract() * std::f64::consts::TAU;
+            z = (ph.cos(), ph.sin());
+        }
+        let v = xv * wv;
+        re += v * z.0;
+        im -= v * z.1;
+        z = (z.0 * rot.1 - z.1 * rot.0, z.0 * rot.0 + z.1 * rot.1);
+    }
+    re.hypot(im)
+}
+
+/// Golden-section maximisation of the DTFT magnitude on `[a, b]`.
+fn refine_peak(x: &[f64], fs: f64, a: f64, b: f64, w: &[f64]) -> f64 {
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    let (mut a, mut b) = (a, b);
+    let mut c = b - g * (b - a);
+    let mut d = a + g * (b - a);
+    let (mut fc, mut fd) = (dtft_mag(x, fs, c, w), dtft_mag(x, fs, d, w));
+    for _ in 0..40 {
+        if fc > fd {
+            b = d;
+            d = c;
+            fd = fc;
+            c = b - g * (b - a);
+            fc = dtft_mag(x, fs, c, w);
+        } else {
+            a = c;
+            c = d;
+            fc = fd;
+            d = a + g * (b - a);
+            fd = dtft_mag(x, fs, d, w);
+        }
+        if (b - a) < 1e-7 * b.abs().max(1.0) {
+            break;
+        }
+    }
+    0.5 * (a + b)
+}
+
+/// Kinematic partners (name, ratio) used to recognise the stage-1 mesh line.
+fn partners(fr: &Frequencies) -> Vec<(&'static str, f64)> {
+    vec![
+        ("f2", fr.f2),
+        ("2f2", fr.two_f2),
+        ("f1-f2", fr.f1_minus_f2),
+        ("f3", fr.f3),
+        ("f1+f2", 1.0 + fr.f2),
+        ("2f1", 2.0),
+    ]
+}
+
+/// Spectrum used for the f1 search: Hann, whole record up to 2^17 samples, Welch above.
+struct SearchSpectrum {
+    freq_step: f64,
+    amp: Vec<f64>,
+    floor: Vec<f64>,
+}
+
+impl SearchSpectrum {
+    fn new(x: &[f64], fs: f64) -> Result<Self> {
+        const MAX: usize = 1 << 17;
+        let s = if x.len() <= MAX {
+            amplitude_spectrum(x, fs, Window::Hann)?
+        } else {
+            welch(x, fs, MAX, 0.5, Window::Hann)?
+        };
+        let floor = local_floor(&s.amplitude, 100, 10);
+        Ok(SearchSpectrum {
+            freq_step: s.resolution(),
+            amp: s.amplitude,
+            floor,
+        })
+    }
+    /// Peak prominence (dB over the local floor) of the largest bin within ±tol Hz of f.
+    fn prominence(&self, f: f64, tol: f64) -> f64 {
+        let lo = ((f - tol) / self.freq_step).floor().max(0.0) as usize;
+        let hi = (((f + tol) / self.freq_step).ceil() as usize).min(self.amp.len() - 1);
+        if lo > hi {
+            return 0.0;
+        }
+        (lo..=hi)
+            .map(|k| 20.0 * (self.amp[k] / self.floor[k]).log10())
+            .fold(f64::NEG_INFINITY, f64::max)
+    }
+}
+
+/// Find f1 (Hz). `band` is the admissible f1 range (Hz).
+fn locate_f1(
+    x: &[f64],
+    fs: f64,
+    fr: &Frequencies,
+    band: (f64, f64),
+    nominal: Option<f64>,
+) -> Result<(f64, F1Detection)> {
+    let spec = SearchSpectrum::new(x, fs)?;
+    let df = spec.freq_step;
+    let tol = |f: f64| (2.0 * df).max(0.002 * f);
+    let w = crate::signal::window(Window::Hann, x.len());
+    let parts = partners(fr);
+    let evidence = |f: f64| -> (f64, Vec<String>) {
+        let mut score = spec.prominence(f, tol(f)).clamp(0.0, 60.0);
+        let mut found = Vec::new();
+        for (name, r) in &parts {
+            let fp = r * f;
+            if fp >= 0.5 * fs {
+                continue;
+            }
+            let p = spec.prominence(fp, tol(fp));
+            score += p.clamp(0.0, 30.0);
+            if p >= 6.0 {
+                found.push(name.to_string());
+            }
+        }
+        (score, found)
+    };
+    if let Some(f0) = nominal {
+        let half = (0.003 * f0).max(2.0 * df);
+        let f = refine_peak(x, fs, f0 - half, f0 + half, &w);
+        let prom = spec.prominence(f, tol(f));
+        let (score, found) = evidence(f);
+        return Ok((
+            f,
+            F1Detection {
+                method: "shaft-speed",
+                initial_hz: f0,
+                prominence_db: prom,
+                partners_found: found,
+                score,
+                runner_up_hz: None,
+                runner_up_score: None,
+                candidates: Vec::new(),
+            },
+        ));
+    }
+    let klo = (band.0 / df).ceil().max(1.0) as usize;
+    let khi = ((band.1 / df).floor() as usize).min(spec.amp.len().saturating_sub(3));
+    let mut cands: Vec<(usize, f64)> = Vec::new();
+    for k in klo.max(2)..=khi {
+        let a = spec.amp[k];
+        if a >= spec.amp[k - 1]
+            && a > spec.amp[k + 1]
+            && a >= spec.amp[k - 2]
+            && a > spec.amp[k + 2]
+        {
+            let p = 20.0 * (a / spec.floor[k]).log10();
+            if p >= 10.0 {
+                cands.push((k, p));
+            }
+        }
+    }
+    if cands.is_empty() {
+        return Err(Error::NoMeshLine {
+            lo_hz: band.0,
+            hi_hz: band.1,
+            reason: "no spectral peak stands 10 dB above the local floor in the band; give the \
+                     shaft rate (--shaft-hz) or check the sample rate"
+                .into(),
+        });
+    }
+    cands.sort_by(|a, b| b.1.total_cmp(&a.1));
+    cands.truncate(40);
+    let mut scored: Vec<(f64, f64, Vec<String>, f64)> = cands
+        .iter()
+        .map(|&(k, p)| {
+            let f = k as f64 * df;
+            let (s, found) = evidence(f);
+            (f, s, found, p)
+        })
+        .collect();
+    scored.sort_by(|a, b| b.1.total_cmp(&a.1));
+    // Harmonic ambiguity: with a rich nonlinear spectrum, 2·f1 finds "partners" too (the
+    // combination tones 2·f2, 2·(f1 − f2), …). Prefer the half-frequency candidate when it is
+    // nearly as well supported and carries most of the first-order partners.
+    let mut pick = 0;
+    for (k, c) in scored.iter().enumerate().skip(1) {
+        let best = &scored[0];
+        if (c.0 - 0.5 * best.0).abs() <= tol(c.0) && c.1 >= best.1 - 15.0 && c.2.len() >= 4 {
+            pick = k;
+            break;
+        }
+    }
+    let (f0, score, found, prom) = scored[pick].clone();
+    let f = refine_peak(x, fs, f0 - 1.5 * df, f0 + 1.5 * df, &w);
+    Ok((
+        f,
+        F1Detection {
+            method: "spectrum",
+            initial_hz: f0,
+            prominence_db: prom,
+            partners_found: found,
+            score,
+            runner_up_hz: scored.get(1).map(|s| s.0),
+            runner_up_score: scored.get(1).map(|s| s.1),
+            candidates: scored
+                .iter()
+                .take(4)
+                .map(|s| (s.0, s.1, s.2.clone()))
+                .collect(),
+        },
+    ))
+}
+
+/// Diagnose one record against a signature table. See the [module docs](self).
+///
+/// Errors (each carries the numbers): [`Error::RecordTooShort`] (empty, or fewer f1 periods
+/// than one estimator segment), [`Error::NonFiniteSample`], [`Error::SampleRateTooLow`],
+/// [`Error::NoMeshLine`], [`Error::SpeedOutOfBand`], [`Error::InvalidParameter`] for a bad
+/// shaft rate or sample rate.
+pub fn diagnose(
+    record: &Record,
+    table: &SignatureTable,
+    opts: &DiagnoseOptions,
+) -> Result<Diagnosis> {
+    let matcher = Matcher::new(table, opts)?;
+    diagnose_with(record, table, &matcher, opts)
+}
+
+/// [`diagnose`] with a prepared [`Matcher`] (what a service keeps between requests).
+pub fn diagnose_with(
+    record: &Record,
+    table: &SignatureTable,
+    matcher: &Matcher,
+    opts: &DiagnoseOptions,
+) -> Result<Diagnosis> {
+    let x = &record.samples;
+    let fs = record.sample_rate;
+    if !(fs.is_finite() && fs > 0.0) {
+        return Err(Error::param(
+            "sample rate",
+            fs,
+            "must be a positive number of samples per second",
+        ));
+    }
+    if let Some((index, &value)) = x.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(Error::NonFiniteSample { index, value });
+    }
+    let cfg = &table.model;
+    let fr = cfg.tooth_counts().frequencies();
+    let f_ref = cfg.reference_frequency_hz;
+    let lines = &table.features.lines;
+    let top = highest_ratio(lines);
+    let (olo, ohi) = table.omega_band();
+    let band_hz = (olo * f_ref, ohi * f_ref);
+    let mut warnings = Vec::new();
+    // Length check against the most lenient f1 of the band (the exact check follows).
+    let needed_for = |f1: f64| segment_len(fs, f1).max(16);
+    let short = |f1: f64| Error::RecordTooShort {
+        samples: x.len(),
+        periods: x.len() as f64 * f1 / fs,
+        f1_hz: f1,
+        needed_periods: SEGMENT_PERIODS as usize,
+        needed_samples: needed_for(f1),
+    };
+    let nominal = match opts.shaft_hz {
+        Some(s) => {
+            if !(s.is_finite() && s > 0.0) {
+                return Err(Error::param(
+                    "shaft_hz",
+                    s,
+                    "the input-shaft rate must be a positive number of Hz",
+                ));
+            }
+            let f1 = cfg.f1_hz(s);
+            let om = f1 / f_ref;
+            if om < olo - 1e-9 || om > ohi + 1e-9 {
+                return Err(Error::SpeedOutOfBand {
+                    f1_hz: f1,
+                    omega1: om,
+                    min: olo,
+                    max: ohi,
+                    min_hz: band_hz.0,
+                    max_hz: band_hz.1,
+                });
+            }
+            if 2.0 * top * f1 >= fs {
+                return Err(Error::SampleRateTooLow {
+                    sample_rate: fs,
+                    highest_line_hz: top * f1,
+                    needed: 2.0 * top * f1,
+                });
+            }
+            if x.len() < needed_for(f1) {
+                return Err(short(f1));
+            }
+            Some(f1)
+        }
+        None => {
+            if 2.0 * top * band_hz.0 >= fs {
+                return Err(Error::SampleRateTooLow {
+                    sample_rate: fs,
+                    highest_line_hz: top * band_hz.0,
+                    needed: 2.0 * top * band_hz.0,
+                });
+            }
+            None
+        }
+    };
+    // The search band: the table's, limited by what the sample rate can carry.
+    let search = (band_hz.0, band_hz.1.min(0.999 * fs / (2.0 * top)));
+    if x.len() < needed_for(search.1) {
+        return Err(short(search.1));
+    }
+    let (f1, detection) = locate_f1(x, fs, &fr, search, nominal)?;
+    let omega1 = f1 / f_ref;
+    if omega1 < olo - 1e-6 || omega1 > ohi + 1e-6 {
+        return Err(Error::SpeedOutOfBand {
+            f1_hz: f1,
+            omega1,
+            min: olo,
+            max: ohi,
+            min_hz: band_hz.0,
+            max_hz: band_hz.1,
+        });
+    }
+    if x.len() < needed_for(f1) {
+        return Err(short(f1));
+    }
+    if detection.prominence_db < 10.0 {
+        warnings.push(format!(
+            "the f1 line at {f1:.2} Hz stands only {:.1} dB over the local floor",
+            detection.prominence_db
+        ));
+    }
+    if detection.method == "spectrum" && detection.partners_found.len() < 2 {
+        warnings.push(format!(
+            "tacho-less f1 = {f1:.2} Hz has only {} kinematic partner line(s) of this rig \
+             ({:?}); the record may come from another gearbox or f1 may be wrong",
+            detection.partners_found.len(),
+            detection.partners_found
+        ));
+    }
+    let meas = measure_lines(x, fs, f1, lines)?;
+    let y = matcher.clip(&meas.features(lines));
+    let mut post = posterior(matcher, &y, omega1, opts);
+    let (chi2, nfeat) = matcher.chi2(&y, post.mode(), post.omega_mean, opts);
+    let fit = Fit {
+        chi2,
+        features: nfeat,
+        chi2_per_feature: chi2 / nfeat.max(1) as f64,
+        inflated: fit_is_poor(chi2 / nfeat.max(1) as f64, opts),
+    };
+    if fit.inflated {
+        // Birge-ratio inflation: scale every variance by χ²/D so the interval reflects the
+        // misfit instead of the (then meaningless) nominal spread.
+        let inflated = DiagnoseOptions {
+            temperature: opts.temperature * fit.chi2_per_feature,
+            ..opts.clone()
+        };
+        post = posterior(matcher, &y, omega1, &inflated);
+        warnings.push(format!(
+            "poor fit: χ² per feature {:.1} at the best table point (threshold {}); the record \
+             does not look like this model's output (another gearbox, sensor or fault?). The \
+             likelihood was flattened by that factor; treat the wear degree and the planetary \
+             flag as unreliable",
+            fit.chi2_per_feature, opts.max_chi2_per_feature
+        ));
+    }
+    let c = opts.credible_level.clamp(0.0, 1.0);
+    let wear = WearDegree {
+        estimate: post.quantile(0.5),
+        lower: post.quantile(0.5 * (1.0 - c)),
+        upper: post.quantile(0.5 * (1.0 + c)),
+        level: c,
+        mode: post.mode(),
+    };
+    // Nearest grid entry for the motion state.
+    let i_ea = nearest(&table.grid.ea, wear.estimate);
+    let i_om = nearest(&table.grid.omega1, omega1);
+    let entry = table.entry(i_ea, i_om);
+    let motion_state = entry.majority_motion();
+    let share = entry.motion.iter().filter(|m| **m == motion_state).count() as f64
+        / entry.motion.len().max(1) as f64;
+    // Nearest entries by likelihood among the Ω1 columns next to the measured one.
+    let mut near: Vec<NearEntry> = Vec::new();
+    let no = table.grid.omega1.len();
+    for j in i_om.saturating_sub(1)..(i_om + 2).min(no) {
+        for i in 0..table.grid.ea.len() {
+            let k = i * no + j;
+            near.push(NearEntry {
+                ea: table.grid.ea[i],
+                omega1: table.grid.omega1[j],
+                log_likelihood: matcher.entry_log_likelihood(&y, k, opts),
+                motion_state: table.entries[k].majority_motion(),
+            });
+        }
+    }
+    near.sort_by(|a, b| b.log_likelihood.total_cmp(&a.log_likelihood));
+    near.truncate(5);
+    // Planetary check.
+    let (m3, v3) = matcher.stats_at(matcher.f3_feature, wear.estimate, omega1);
+    let s3 = (v3 + opts.feature_sigma.powi(2)).sqrt();
+    let z3 = (y[matcher.f3_feature] - m3) / s3;
+    let planetary = PlanetaryCheck {
+        f3_log_ratio: y[matcher.f3_feature],
+        expected: m3,
+        sigma: s3,
+        z: z3,
+        threshold: opts.planetary_z,
+    };
+    // Lines.
+    let i1 = LineMeasurement::index(lines, "f1").unwrap_or(0);
+    let a1 = meas.amplitudes[i1];
+    let to_db = 20.0 / std::f64::consts::LN_10;
+    let out_lines = lines
+        .iter()
+        .enumerate()
+        .map(|(i, l)| {
+            let expected = feature_index(lines, &l.name).map(|d| {
+                let (m, v) = matcher.stats_at(d, wear.estimate, omega1);
+                (m * to_db, v.sqrt() * to_db)
+            });
+            MatchedLine {
+                name: l.name.clone(),
+                normalised_frequency: l.ratio,
+                frequency_hz: l.ratio * f1,
+                amplitude: meas.amplitudes[i],
+                level_db: 20.0 * (meas.amplitudes[i] / a1).log10(),
+                expected_db: if l.name == "f1" {
+                    Some(0.0)
+                } else {
+                    expected.map(|e| e.0)
+                },
+                expected_std_db: if l.name == "f1" {
+                    Some(0.0)
+                } else {
+                    expected.map(|e| e.1)
+                },
+            }
+        })
+        .collect();
+    let other: Vec<f64> = lines
+        .iter()
+        .filter(|l| l.name != "f1" && l.name != "2f1")
+        .map(|l| l.ratio * f1)
+        .collect();
+    let shaft = f1 / fr.f1 * fr.shaft_in;
+    let ci = condition_indicators(x, fs, f1, shaft, &other)?;
+    let coarse: Vec<(f64, f64)> = {
+        // Density on a 0.01 grid (per unit ea).
+        let step = post.ea.get(1).map(|e| e - post.ea[0]).unwrap_or(1.0);
+        let per = ((0.01 / step).round() as usize).max(1);
+        post.ea
+            .chunks(per)
+            .zip(post.p.chunks(per))
+            .map(|(e, p)| {
+                let mass: f64 = p.iter().sum();
+                let round = |v: f64| (v * 1e4).round() / 1e4;
+                (round(e[0]), round(mass / (step * p.len() as f64)))
+            })
+            .collect()
+    };
+    Ok(Diagnosis {
+        wear_degree: wear,
+        f1_hz: f1,
+        shaft_hz: shaft,
+        omega1,
+        omega1_posterior: post.omega_mean,
+        f1_detection: detection,
+        motion_state,
+        motion_state_share: share,
+        planetary_clearance_elevated: z3 > opts.planetary_z,
+        planetary,
+        lines: out_lines,
+        condition_indicators: ci,
+        nearest_entries: near,
+        posterior: coarse,
+        fit,
+        baseline_single_ratio: Baseline {
+            method: "paper: ea whose table mean ln(A_f2/A_f1) at the measured Ω1 is closest",
+            ea: matcher.baseline(&y, omega1, opts.ea_step),
+        },
+        record: RecordInfo {
+            samples: x.len(),
+            sample_rate_hz: fs,
+            duration_s: x.len() as f64 / fs,
+            f1_periods: x.len() as f64 * f1 / fs,
+            welch_segments: meas.segments,
+            segment_len: meas.segment_len,
+        },
+        table_model_hash: table.model_hash.clone(),
+        sensor: table.sensor.label().into(),
+        warnings,
+    })
+}
+
+fn nearest(axis: &[f64], v: f64) -> usize {
+    axis.iter()
+        .enumerate()
+        .min_by(|a, b| (a.1 - v).abs().total_cmp(&(b.1 - v).abs()))
+        .map(|(i, _)| i)
+        .unwrap_or(0)
+}

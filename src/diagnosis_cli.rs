@@ -1,0 +1,240 @@
+//! The `precompute` and `diagnose` commands (argument structs and bodies; [`crate::cli`]
+//! dispatches to them).
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, ValueEnum};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use crate::analysis::bifurcation::grid;
+use crate::cli::{RigArgs, parse_range};
+use crate::diagnosis::{DiagnoseOptions, diagnose};
+use crate::record::{Column, Format, ReadOptions, read_record};
+use crate::signature::precompute::{PrecomputeSpec, partial_path, precompute};
+use crate::signature::table::{DEFAULT_TABLE_PATH, Grid, SimulationSettings};
+use crate::signature::{SensorQuantity, SignatureTable};
+
+/// Sensor quantity on the command line.
+#[derive(Debug, Clone, Copy, ValueEnum)]
+pub enum SensorArg {
+    /// Stage-1 relative displacement x̄1.
+    X1,
+    /// Stage-1 relative acceleration x̄1'' (default).
+    Accel,
+    /// Stage-1 dynamic mesh force.
+    MeshForce,
+}
+
+impl From<SensorArg> for SensorQuantity {
+    fn from(s: SensorArg) -> Self {
+        match s {
+            SensorArg::X1 => SensorQuantity::X1,
+            SensorArg::Accel => SensorQuantity::Accel,
+            SensorArg::MeshForce => SensorQuantity::MeshForce,
+        }
+    }
+}
+
+#[derive(Debug, Args)]
+pub struct PrecomputeArgs {
+    /// Output table (JSON).
+    #[arg(long, default_value = DEFAULT_TABLE_PATH)]
+    pub output: PathBuf,
+    /// Wear-degree grid START:END:STEP (units of b = 5 µm).
+    #[arg(long, default_value = "0.1:1:0.025")]
+    pub ea: String,
+    /// Ω1 grid START:END:STEP.
+    #[arg(long, default_value = "0.5:1.6:0.05")]
+    pub omega1: String,
+    /// Random initial states (and transient lengths) per grid point.
+    #[arg(long, default_value_t = 6)]
+    pub seeds: usize,
+    /// Retained stage-1 mesh periods per seed.
+    #[arg(long, default_value_t = SimulationSettings::default().periods)]
+    pub periods: usize,
+    /// Simulated sensor quantity.
+    #[arg(long, value_enum, default_value_t = SensorArg::Accel)]
+    pub sensor: SensorArg,
+    /// Ignore (and overwrite) a partial file from an interrupted run.
+    #[arg(long)]
+    pub fresh: bool,
+    #[command(flatten)]
+    pub rig: RigArgs,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+pub enum FormatArg {
+    Csv,
+    F32,
+    Wav,
+}
+
+#[derive(Debug, Args)]
+pub struct DiagnoseArgs {
+    /// Record file: CSV (one column, time,value, or pick --column; `.gz` ok), raw
+    /// little-endian f32, or WAV.
+    #[arg(long)]
+    pub input: PathBuf,
+    /// Sample rate in Hz (required for f32 and for CSV without a time column; overrides WAV).
+    #[arg(long)]
+    pub sample_rate: Option<f64>,
+    /// Input (motor) shaft rate in Hz; f1 = 29 × this on the paper's rig. Without it f1 is
+    /// found in the spectrum.
+    #[arg(long)]
+    pub shaft_hz: Option<f64>,
+    /// CSV column (0-based index or header name) or WAV channel.
+    #[arg(long)]
+    pub column: Option<String>,
+    /// File format (default: from the extension).
+    #[arg(long, value_enum)]
+    pub format: Option<FormatArg>,
+    /// Signature table.
+    #[arg(long, default_value = DEFAULT_TABLE_PATH)]
+    pub table: PathBuf,
+    /// Credible level of the wear interval.
+    #[arg(long, default_value_t = DiagnoseOptions::default().credible_level)]
+    pub level: f64,
+    /// Use a table computed for another model configuration anyway.
+    #[arg(long)]
+    pub allow_stale: bool,
+    /// Model configuration the table must match (default: the committed one).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+}
+
+fn bar(len: u64, what: &str) -> ProgressBar {
+    if std::io::stderr().is_terminal() {
+        let b = ProgressBar::new(len);
+        b.set_style(
+            ProgressStyle::with_template(&format!(
+                "{{spinner}} {what} [{{bar:40}}] {{pos}}/{{len}} ({{eta}} left)"
+            ))
+            .expect("static template")
+            .progress_chars("=> "),
+        );
+        b
+    } else {
+        ProgressBar::hidden()
+    }
+}
+
+/// `gearwear precompute`.
+pub fn precompute_cmd(a: PrecomputeArgs) -> Result<()> {
+    let cfg = a.rig.load()?;
+    if a.rig.planetary_error.is_some() {
+        bail!(
+            "--planetary-error is not supported by precompute: the table uses the config's value"
+        );
+    }
+    let (e0, e1, es) = parse_range(&a.ea)?;
+    let (o0, o1, os) = parse_range(&a.omega1)?;
+    let round = |v: f64| (v * 1e6).round() / 1e6;
+    let g = Grid {
+        ea: grid(e0, e1, es).into_iter().map(round).collect(),
+        omega1: grid(o0, o1, os).into_iter().map(round).collect(),
+        seeds: a.seeds,
+    };
+    if g.ea.len() < 2 {
+        bail!("the ea grid needs at least 2 values, got {:?}", g.ea);
+    }
+    if a.seeds == 0 {
+        bail!("--seeds must be at least 1");
+    }
+    let settings = SimulationSettings {
+        periods: a.periods,
+        ..Default::default()
+    };
+    if (settings.periods as f64) < crate::signature::SEGMENT_PERIODS {
+        bail!(
+            "--periods must be at least {} (one estimator segment)",
+            crate::signature::SEGMENT_PERIODS
+        );
+    }
+    let created_by = std::iter::once("gearwear".to_string())
+        .chain(std::env::args().skip(1))
+        .collect::<Vec<_>>()
+        .join(" ");
+    let spec = PrecomputeSpec {
+        config: cfg,
+        sensor: a.sensor.into(),
+        grid: g.clone(),
+        settings,
+        created_by,
+    };
+    let partial = partial_path(&a.output);
+    if a.fresh {
+        let _ = std::fs::remove_file(&partial);
+    }
+    let total = g.ea.len() * g.omega1.len();
+    eprintln!(
+        "precompute: {} ea × {} Ω1 × {} seeds = {} runs on {} threads; partial results in {}",
+        g.ea.len(),
+        g.omega1.len(),
+        g.seeds,
+        total * g.seeds,
+        rayon::current_num_threads(),
+        partial.display()
+    );
+    let pb = bar(total as u64, "grid points");
+    let table = precompute(&spec, Some(&partial), &|| pb.inc(1))?;
+    pb.finish_and_clear();
+    let json = table.to_json()?;
+    if let Some(dir) = a.output.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    std::fs::write(&a.output, json).with_context(|| format!("writing {}", a.output.display()))?;
+    let _ = std::fs::remove_file(&partial);
+    let failed: usize = table.entries.iter().map(|e| e.failed).sum();
+    eprintln!(
+        "wrote {} ({} entries, {failed} failed seeds) in {:.1} s",
+        a.output.display(),
+        table.entries.len(),
+        table.precompute_seconds
+    );
+    Ok(())
+}
+
+/// `gearwear diagnose`.
+pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
+    let cfg = RigArgs {
+        config: a.config.clone(),
+        planetary_error: None,
+    }
+    .load()?;
+    let table = SignatureTable::load(&a.table).with_context(|| {
+        format!(
+            "loading the signature table (regenerate with `gearwear precompute --output {}`)",
+            a.table.display()
+        )
+    })?;
+    if let Err(e) = table.check_model(&cfg) {
+        if a.allow_stale {
+            eprintln!("warning: {e}");
+        } else {
+            return Err(e.into());
+        }
+    }
+    let opts = ReadOptions {
+        format: a.format.map(|f| match f {
+            FormatArg::Csv => Format::Csv,
+            FormatArg::F32 => Format::F32,
+            FormatArg::Wav => Format::Wav,
+        }),
+        sample_rate: a.sample_rate,
+        column: a.column.as_deref().map(Column::parse),
+    };
+    let record = read_record(&a.input, &opts)?;
+    let d = diagnose(
+        &record,
+        &table,
+        &DiagnoseOptions {
+            shaft_hz: a.shaft_hz,
+            credible_level: a.level,
+            ..Default::default()
+        },
+    )?;
+    println!("{}", serde_json::to_string_pretty(&d)?);
+    Ok(())
+}

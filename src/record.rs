@@ -1,0 +1,544 @@
+//! Measured records and the file formats they come in.
+//!
+//! | format | layout | sample rate |
+//! | --- | --- | --- |
+//! | `csv` | one value per line, or `time,value`, or several columns (pick one with `column`); header optional; `,` `;` tab or spaces; `#` comments; gzip when the name ends in `.gz` | `sample_rate`, else from a time column |
+//! | `f32` | raw little-endian IEEE-754 `f32`, no header | `sample_rate` (required) |
+//! | `wav` | RIFF/WAVE, PCM 8/16/24/32-bit integer or 32/64-bit float (also `WAVE_FORMAT_EXTENSIBLE`), any channel count (pick one with `column`, default 0) | the header (overridden by `sample_rate` if given) |
+//!
+//! Integer WAV samples are scaled to `[−1, 1)`; the unit does not matter to the diagnosis
+//! (every matching feature is gain-invariant). Nothing here panics on malformed input: every
+//! problem comes back as [`Error::RecordFormat`] (or [`Error::NonFiniteSample`]) naming the
+//! file and what is wrong.
+
+use std::io::Read;
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+
+/// A sampled record: samples in arbitrary (consistent) units, sample rate in Hz.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Record {
+    pub samples: Vec<f64>,
+    /// Samples per second.
+    pub sample_rate: f64,
+}
+
+/// File formats.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Format {
+    Csv,
+    F32,
+    Wav,
+}
+
+impl Format {
+    /// Guess from the file name: `.wav` → WAV, `.f32`/`.raw`/`.bin` → f32, otherwise CSV
+    /// (`.gz` is stripped first).
+    pub fn from_path(path: &Path) -> Format {
+        let name = path
+            .file_name()
+            .and_then(|s| s.to_str())
+            .unwrap_or("")
+            .to_ascii_lowercase();
+        let name = name.strip_suffix(".gz").unwrap_or(&name);
+        if name.ends_with(".wav") {
+            Format::Wav
+        } else if name.ends_with(".f32") || name.ends_with(".raw") || name.ends_with(".bin") {
+            Format::F32
+        } else {
+            Format::Csv
+        }
+    }
+}
+
+/// Which column (CSV) or channel (WAV) to read.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Column {
+    /// 0-based index.
+    Index(usize),
+    /// Header name (CSV only).
+    Name(String),
+}
+
+impl Column {
+    /// `"2"` → index 2, anything else → a name.
+    pub fn parse(s: &str) -> Column {
+        match s.trim().parse::<usize>() {
+            Ok(i) => Column::Index(i),
+            Err(_) => Column::Name(s.trim().to_string()),
+        }
+    }
+}
+
+/// How to read a record.
+#[derive(Debug, Clone, Default)]
+pub struct ReadOptions {
+    /// Format; `None`: from the file name ([`Format::from_path`]).
+    pub format: Option<Format>,
+    /// Sample rate in Hz; overrides a WAV header or a CSV time column.
+    pub sample_rate: Option<f64>,
+    /// Column / channel; `None`: the only column, the value of `time,value`, channel 0.
+    pub column: Option<Column>,
+}
+
+fn fmt_err(path: &str, reason: impl Into<String>) -> Error {
+    Error::RecordFormat {
+        path: path.to_string(),
+        reason: reason.into(),
+    }
+}
+
+/// Read a record file (gzip-compressed when the name ends in `.gz`).
+pub fn read_record(path: &Path, opts: &ReadOptions) -> Result<Record> {
+    let name = path.display().to_string();
+    let mut bytes = std::fs::read(path).map_err(|source| Error::Io {
+        path: name.clone(),
+        source,
+    })?;
+    if name.to_ascii_lowercase().ends_with(".gz") {
+        let mut out = Vec::new();
+        flate2::read::MultiGzDecoder::new(&bytes[..])
+            .read_to_end(&mut out)
+            .map_err(|e| fmt_err(&name, format!("gzip decompression failed: {e}")))?;
+        bytes = out;
+    }
+    let format = opts.format.unwrap_or_else(|| Format::from_path(path));
+    parse_record(&bytes, format, opts, &name)
+}
+
+/// Parse a record from bytes (already decompressed); `origin` names it in errors.
+pub fn parse_record(
+    bytes: &[u8],
+    format: Format,
+    opts: &ReadOptions,
+    origin: &str,
+) -> Result<Record> {
+    if let Some(fs) = opts.sample_rate
+        && !(fs.is_finite() && fs > 0.0)
+    {
+        return Err(Error::param(
+            "sample rate",
+            fs,
+            "must be a positive number of samples per second",
+        ));
+    }
+    let rec = match format {
+        Format::Csv => parse_csv(bytes, opts, origin)?,
+        Format::F32 => parse_f32(bytes, opts, origin)?,
+        Format::Wav => parse_wav(bytes, opts, origin)?,
+    };
+    if rec.samples.is_empty() {
+        return Err(fmt_err(origin, "the record holds no samples"));
+    }
+    if let Some((index, &value)) = rec.samples.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(Error::NonFiniteSample { index, value });
+    }
+    Ok(rec)
+}
+
+fn split_fields(line: &str) -> Vec<&str> {
+    let sep: &[char] = if line.contains(',') {
+        &[',']
+    } else if line.contains(';') {
+        &[';']
+    } else if line.contains('\t') {
+        &['\t']
+    } else {
+        &[' ']
+    };
+    line.split(sep)
+        .map(|f| f.trim().trim_matches('"'))
+        .filter(|f| !(sep == [' '] && f.is_empty()))
+        .collect()
+}
+
+fn parse_number(s: &str) -> Option<f64> {
+    // Accept "nan"/"inf" as numbers so that they are reported as non-finite samples, not as a
+    // header.
+    s.parse::<f64>().ok()
+}
+
+fn parse_csv(bytes: &[u8], opts: &ReadOptions, origin: &str) -> Result<Record> {
+    let text = std::str::from_utf8(bytes)
+        .map_err(|e| fmt_err(origin, format!("not UTF-8 text ({e}); wrong --format?")))?;
+    let mut header: Option<Vec<String>> = None;
+    let mut rows: Vec<Vec<f64>> = Vec::new();
+    let mut width = 0usize;
+    for (lineno, raw) in text.lines().enumerate() {
+        let line = raw.trim().trim_start_matches('\u{feff}');
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let fields = split_fields(line);
+        let nums: Vec<Option<f64>> = fields.iter().map(|f| parse_number(f)).collect();
+        if rows.is_empty() && header.is_none() && nums.iter().any(|v| v.is_none()) {
+            header = Some(fields.iter().map(|s| s.to_string()).collect());
+            width = fields.len();
+            continue;
+        }
+        if width == 0 {
+            width = fields.len();
+        }
+        if fields.len() != width {
+            return Err(fmt_err(
+                origin,
+                format!(
+                    "line {}: {} fields, expected {width} (as on the first line)",
+                    lineno + 1,
+                    fields.len()
+                ),
+            ));
+        }
+        let mut row = Vec::with_capacity(width);
+        for (f, v) in fields.iter().zip(nums) {
+            match v {
+                Some(v) => row.push(v),
+                None => {
+                    return Err(fmt_err(
+                        origin,
+                        format!("line {}: `{f}` is not a number", lineno + 1),
+                    ));
+                }
+            }
+        }
+        rows.push(row);
+    }
+    if rows.is_empty() {
+        return Err(fmt_err(origin, "no numeric rows (empty file?)"));
+    }
+    let names = header.clone().unwrap_or_default();
+    let is_time = |s: &str| {
+        let s = s.to_ascii_lowercase();
+        s == "t" || s.starts_with("time") || s == "t_s" || s == "seconds"
+    };
+    let time_col = if width == 2 {
+        Some(0)
+    } else {
+        names.iter().position(|n| is_time(n))
+    };
+    let value_col = match &opts.column {
+        Some(Column::Index(i)) => {
+            if *i >= width {
+                return Err(fmt_err(
+                    origin,
+                    format!("column {i} requested, the file has {width} (0-based indices)"),
+                ));
+            }
+            *i
+        }
+        Some(Column::Name(n)) => names.iter().position(|h| h == n).ok_or_else(|| {
+            fmt_err(
+                origin,
+                if names.is_empty() {
+                    format!("column `{n}` requested but the file has no header; use an index")
+                } else {
+                    format!("no column `{n}`; the header has: {}", names.join(", "))
+                },
+            )
+        })?,
+        None => match width {
+            1 => 0,
+            2 => 1,
+            _ => {
+                return Err(fmt_err(
+                    origin,
+                    format!(
+                        "{width} columns{}: choose one with --column (index from 0 or a name)",
+                        if names.is_empty() {
+                            String::new()
+                        } else {
+                            format!(" ({})", names.join(", "))
+                        }
+                    ),
+                ));
+            }
+        },
+    };
+    let samples: Vec<f64> = rows.iter().map(|r| r[value_col]).collect();
+    let sample_rate = match opts.sample_rate {
+        Some(fs) => fs,
+        None => match time_col.filter(|&t| t != value_col) {
+            Some(t) if rows.len() >= 2 => {
+                let t0 = rows[0][t];
+                let t1 = rows[rows.len() - 1][t];
+                let dt = (t1 - t0) / (rows.len() - 1) as f64;
+                if !(dt.is_finite() && dt > 0.0) {
+                    return Err(fmt_err(
+                        origin,
+                        format!(
+                            "the time column does not increase ({t0} … {t1}); give --sample-rate"
+                        ),
+                    ));
+                }
+                // Uniform sampling check: every step within 1 % of the mean step.
+                if let Some(k) = (1..rows.len())
+                    .find(|&k| ((rows[k][t] - rows[k - 1][t]) - dt).abs() > 0.01 * dt)
+                {
+                    return Err(fmt_err(
+                        origin,
+                        format!(
+                            "non-uniform time column at row {k}: step {} vs mean {dt}; \
+                             resample or give --sample-rate",
+                            rows[k][t] - rows[k - 1][t]
+                        ),
+                    ));
+                }
+                1.0 / dt
+            }
+            _ => {
+                return Err(fmt_err(
+                    origin,
+                    "no time column: give the sample rate (--sample-rate HZ)",
+                ));
+            }
+        },
+    };
+    Ok(Record {
+        samples,
+        sample_rate,
+    })
+}
+
+fn parse_f32(bytes: &[u8], opts: &ReadOptions, origin: &str) -> Result<Record> {
+    let fs = opts.sample_rate.ok_or_else(|| {
+        fmt_err(
+            origin,
+            "raw f32 has no header: give the sample rate (--sample-rate HZ)",
+        )
+    })?;
+    if !bytes.len().is_multiple_of(4) {
+        return Err(fmt_err(
+            origin,
+            format!(
+                "{} bytes is not a whole number of 4-byte f32 samples (truncated file?)",
+                bytes.len()
+            ),
+        ));
+    }
+    Ok(Record {
+        samples: bytes
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64)
+            .collect(),
+        sample_rate: fs,
+    })
+}
+
+fn u16_at(b: &[u8], i: usize) -> Option<u16> {
+    Some(u16::from_le_bytes(b.get(i..i + 2)?.try_into().ok()?))
+}
+fn u32_at(b: &[u8], i: usize) -> Option<u32> {
+    Some(u32::from_le_bytes(b.get(i..i + 4)?.try_into().ok()?))
+}
+
+fn parse_wav(bytes: &[u8], opts: &ReadOptions, origin: &str) -> Result<Record> {
+    let e = |r: String| fmt_err(origin, r);
+    if bytes.len() < 12 || &bytes[0..4] != b"RIFF" || &bytes[8..12] != b"WAVE" {
+        return Err(e("not a RIFF/WAVE file".into()));
+    }
+    let mut pos = 12usize;
+    let mut fmt: Option<(u16, u16, u32, u16)> = None; // tag, channels, rate, bits
+    let mut data: Option<&[u8]> = None;
+    while pos + 8 <= bytes.len() {
+        let id = &bytes[pos..pos + 4];
+        let size = u32_at(bytes, pos + 4).unwrap_or(0) as usize;
+        let body_start = pos + 8;
+        let body_end = body_start.saturating_add(size);
+        if id == b"data" {
+            if body_end > bytes.len() {
+                return Err(e(format!(
+                    "truncated: the data chunk declares {size} bytes, {} are present",
+                    bytes.len() - body_start
+                )));
+            }
+            data = Some(&bytes[body_start..body_end]);
+        } else if id == b"fmt " {
+            if size < 16 || body_end > bytes.len() {
+                return Err(e("truncated or malformed fmt chunk".into()));
+            }
+            let mut tag = u16_at(bytes, body_start).unwrap_or(0);
+            let channels = u16_at(bytes, body_start + 2).unwrap_or(0);
+            let rate = u32_at(bytes, body_start + 4).unwrap_or(0);
+            let bits = u16_at(bytes, body_start + 14).unwrap_or(0);
+            if tag == 0xFFFE {
+                // WAVE_FORMAT_EXTENSIBLE: the sub-format GUID starts with the real tag.
+                tag = u16_at(bytes, body_start + 24)
+                    .ok_or_else(|| e("truncated WAVE_FORMAT_EXTENSIBLE fmt chunk".into()))?;
+            }
+            fmt = Some((tag, channels, rate, bits));
+        }
+        if body_end >= bytes.len() {
+            break;
+        }
+        pos = body_end + (size & 1); // chunks are padded to even sizes
+    }
+    let (tag, channels, rate, bits) = fmt.ok_or_else(|| e("no fmt chunk (truncated?)".into()))?;
+    let data = data.ok_or_else(|| e("no data chunk (truncated?)".into()))?;
+    if channels == 0 {
+        return Err(e("fmt chunk declares 0 channels".into()));
+    }
+    let bytes_per = (bits as usize).div_ceil(8);
+    let decode: fn(&[u8]) -> f64 = match (tag, bits) {
+        (1, 8) => |c| (c[0] as f64 - 128.0) / 128.0,
+        (1, 16) => |c| i16::from_le_bytes([c[0], c[1]]) as f64 / 32768.0,
+        (1, 24) => |c| {
+            let v = i32::from_le_bytes([0, c[0], c[1], c[2]]) >> 8;
+            v as f64 / 8_388_608.0
+        },
+        (1, 32) => |c| i32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64 / 2_147_483_648.0,
+        (3, 32) => |c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64,
+        (3, 64) => |c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]),
+        _ => {
+            return Err(e(format!(
+                "unsupported WAV encoding: format tag {tag}, {bits} bits (supported: PCM \
+                 8/16/24/32-bit integer, IEEE float 32/64-bit)"
+            )));
+        }
+    };
+    let ch = match &opts.column {
+        None => 0,
+        Some(Column::Index(i)) => *i,
+        Some(Column::Name(n)) => {
+            return Err(e(format!(
+                "WAV channels have no names (`{n}`); give a channel index"
+            )));
+        }
+    };
+    if ch >= channels as usize {
+        return Err(e(format!(
+            "channel {ch} requested, the file has {channels} (0-based)"
+        )));
+    }
+    let frame = bytes_per * channels as usize;
+    if data.len() % frame != 0 {
+        return Err(e(format!(
+            "truncated: {} data bytes is not a whole number of {frame}-byte frames",
+            data.len()
+        )));
+    }
+    let samples = data
+        .chunks_exact(frame)
+        .map(|f| decode(&f[ch * bytes_per..(ch + 1) * bytes_per]))
+        .collect();
+    let sample_rate = match opts.sample_rate {
+        Some(fs) => fs,
+        None if rate > 0 => rate as f64,
+        None => return Err(e("the header's sample rate is 0; give --sample-rate".into())),
+    };
+    Ok(Record {
+        samples,
+        sample_rate,
+    })
+}
+
+/// Encode samples as a mono WAV file (PCM 16-bit when `float` is false, else 32-bit float);
+/// samples are clipped to `[−1, 1]` for PCM. For tests and for exporting simulated records.
+pub fn encode_wav(samples: &[f64], sample_rate: u32, float: bool) -> Vec<u8> {
+    let (tag, bits): (u16, u16) = if float { (3, 32) } else { (1, 16) };
+    let bytes_per = bits as u32 / 8;
+    let data_len = samples.len() as u32 * bytes_per;
+    let mut b = Vec::with_capacity(44 + data_len as usize);
+    b.extend_from_slice(b"RIFF");
+    b.extend_from_slice(&(36 + data_len).to_le_bytes());
+    b.extend_from_slice(b"WAVEfmt ");
+    b.extend_from_slice(&16u32.to_le_bytes());
+    b.extend_from_slice(&tag.to_le_bytes());
+    b.extend_from_slice(&1u16.to_le_bytes());
+    b.extend_from_slice(&sample_rate.to_le_bytes());
+    b.extend_from_slice(&(sample_rate * bytes_per).to_le_bytes());
+    b.extend_from_slice(&(bytes_per as u16).to_le_bytes());
+    b.extend_from_slice(&bits.to_le_bytes());
+    b.extend_from_slice(b"data");
+    b.extend_from_slice(&data_len.to_le_bytes());
+    for &s in samples {
+        if float {
+            b.extend_from_slice(&(s as f32).to_le_bytes());
+        } else {
+            let v = (s.clamp(-1.0, 1.0) * 32767.0).round() as i16;
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    b
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn opts(fs: Option<f64>, col: Option<&str>) -> ReadOptions {
+        ReadOptions {
+            format: None,
+            sample_rate: fs,
+            column: col.map(Column::parse),
+        }
+    }
+
+    #[test]
+    fn csv_variants() {
+        let r = parse_record(b"1\n2\n3\n", Format::Csv, &opts(Some(10.0), None), "t").unwrap();
+        assert_eq!(r.samples, vec![1.0, 2.0, 3.0]);
+        let r = parse_record(
+            b"time,acc\n0,1\n0.5,2\n1.0,3\n",
+            Format::Csv,
+            &opts(None, None),
+            "t",
+        )
+        .unwrap();
+        assert_eq!(r.samples, vec![1.0, 2.0, 3.0]);
+        assert!((r.sample_rate - 2.0).abs() < 1e-12);
+        let r = parse_record(
+            b"a1,a2,a3\n1,2,3\n4,5,6\n",
+            Format::Csv,
+            &opts(Some(1.0), Some("a2")),
+            "t",
+        )
+        .unwrap();
+        assert_eq!(r.samples, vec![2.0, 5.0]);
+        let r = parse_record(
+            b"1;2;3\n4;5;6\n",
+            Format::Csv,
+            &opts(Some(1.0), Some("2")),
+            "t",
+        )
+        .unwrap();
+        assert_eq!(r.samples, vec![3.0, 6.0]);
+        assert!(parse_record(b"1,2,3\n", Format::Csv, &opts(Some(1.0), None), "t").is_err());
+        assert!(parse_record(b"1\n2\n", Format::Csv, &opts(None, None), "t").is_err());
+        assert!(parse_record(b"", Format::Csv, &opts(Some(1.0), None), "t").is_err());
+        assert!(matches!(
+            parse_record(b"1\nnan\n", Format::Csv, &opts(Some(1.0), None), "t"),
+            Err(Error::NonFiniteSample { index: 1, .. })
+        ));
+    }
+
+    #[test]
+    fn f32_and_wav() {
+        let x: Vec<f64> = (0..100).map(|i| (i as f64 * 0.1).sin() * 0.5).collect();
+        let raw: Vec<u8> = x.iter().flat_map(|v| (*v as f32).to_le_bytes()).collect();
+        let r = parse_record(&raw, Format::F32, &opts(Some(100.0), None), "t").unwrap();
+        assert!((r.samples[7] - x[7]).abs() < 1e-6);
+        assert!(
+            parse_record(
+                &raw[..raw.len() - 1],
+                Format::F32,
+                &opts(Some(1.0), None),
+                "t"
+            )
+            .is_err()
+        );
+        assert!(parse_record(&raw, Format::F32, &opts(None, None), "t").is_err());
+        for float in [false, true] {
+            let w = encode_wav(&x, 8000, float);
+            let r = parse_record(&w, Format::Wav, &opts(None, None), "t").unwrap();
+            assert_eq!(r.sample_rate, 8000.0);
+            assert_eq!(r.samples.len(), x.len());
+            assert!((r.samples[7] - x[7]).abs() < 1e-4);
+            assert!(parse_record(&w[..w.len() - 3], Format::Wav, &opts(None, None), "t").is_err());
+            assert!(parse_record(&w[..30], Format::Wav, &opts(None, None), "t").is_err());
+        }
+    }
+}
