@@ -120,7 +120,7 @@ async fn dashboard_updates_when_a_record_arrives() {
             "binary": chromium,
             "args": ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                      "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                     "--disable-dev-shm-usage", "--window-size=1280,1100",
+                     "--disable-dev-shm-usage", "--window-size=1280,1500",
                      format!("--user-data-dir={}", profile.display())]
         }
     }}});

@@ -97,7 +97,7 @@ function renderSpectrum(d) {
   const s = d && d.spectrum;
   if (!s) return;
   const W = 640, H = 260, pad = { l: 44, r: 12, t: 18, b: 26 };
-  const ymin = -80, ymax = 10, xmax = s.f_over_f1[s.f_over_f1.length - 1] || 2.5;
+  const ymin = -80, ymax = 0, xmax = s.f_over_f1[s.f_over_f1.length - 1] || 2.5;
   const [sx, sy] = axes(svg, W, H, pad, 0, xmax, ymin, ymax, "f / f1", "dB re f1");
   const pts = s.f_over_f1.map((f, i) => sx(f) + "," + sy(Math.max(ymin, Math.min(ymax, s.level_db[i]))));
   el("polyline", { points: pts.join(" "), fill: "none", stroke: "#334155", "stroke-width": 1, id: "spectrum-line" }, svg);
