@@ -39,6 +39,10 @@ pub enum Command {
     WearLines(WearLinesArgs),
     /// The second seed's 10-DOF space drive (Model B).
     ModelB(crate::model_b_cli::ModelBArgs),
+    /// Run the wear-diagnosis HTTP service (API v1, dashboard, webhooks).
+    Serve(crate::service::cli::ServeArgs),
+    /// Create, list and revoke the service's API keys.
+    Keys(crate::service::cli::KeysArgs),
     /// Simulate the signature table for diagnosis (ea × Ω1 × seeds).
     Precompute(crate::diagnosis_cli::PrecomputeArgs),
     /// Estimate the wear degree from an accelerometer record.
@@ -273,6 +277,8 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Frequencies(a) => frequencies(a),
         Command::WearLines(a) => wear_lines(a),
         Command::ModelB(a) => crate::model_b_cli::run(a),
+        Command::Serve(a) => crate::service::cli::serve_cmd(a),
+        Command::Keys(a) => crate::service::cli::keys_cmd(a),
         Command::Precompute(a) => crate::diagnosis_cli::precompute_cmd(a),
         Command::Diagnose(a) => crate::diagnosis_cli::diagnose_cmd(a),
     }

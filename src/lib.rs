@@ -22,15 +22,20 @@
 
 pub mod analysis;
 pub mod cli;
+pub mod configuration;
 pub mod diagnosis;
 pub mod diagnosis_cli;
 pub mod error;
+pub mod keys;
 pub mod model;
 pub mod model_b_cli;
 pub mod plot;
 pub mod record;
+pub mod service;
 pub mod signal;
 pub mod signature;
 pub mod solver;
+pub mod store;
+pub mod telemetry;
 
 pub use error::{Error, Result};

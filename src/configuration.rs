@@ -1,0 +1,116 @@
+//! Settings of the service: one struct with documented defaults, filled from the command line
+//! (and the environment variables clap reads for it, e.g. `DATABASE_URL`).
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::Duration;
+
+/// Everything `serve` needs.
+#[derive(Debug, Clone)]
+pub struct Settings {
+    /// Where to listen (default `127.0.0.1:8080`).
+    pub address: SocketAddr,
+    /// `postgres://…` → PostgreSQL; anything else is a SQLite file (default `gearwear.db`).
+    pub database_url: String,
+    /// The signature table (default: the committed one under `signatures/`).
+    pub signatures: PathBuf,
+    /// Serve the dashboard and the read endpoints without a key.
+    pub open_dashboard: bool,
+    /// Logs as JSON lines instead of human-readable text.
+    pub log_json: bool,
+    pub limits: Limits,
+    pub thresholds: Thresholds,
+    pub webhooks: WebhookSettings,
+    /// Raw samples are kept this long (0: never stored); metadata, features and diagnoses
+    /// are kept forever.
+    pub raw_retention: Duration,
+}
+
+/// Request limits. Each refusal is a problem+json naming the limit.
+#[derive(Debug, Clone)]
+pub struct Limits {
+    /// Largest request body in bytes (default 16 MiB).
+    pub max_body_bytes: usize,
+    /// Largest record in samples (default 2 097 152: 80 s at 25.6 kHz).
+    pub max_samples: usize,
+    /// Sustained requests per second per API key (token bucket refill rate).
+    pub rate_per_second: f64,
+    /// Token-bucket size: the burst a key may send at once.
+    pub rate_burst: f64,
+    /// Longest a request may take before it gets a 503.
+    pub request_timeout: Duration,
+}
+
+/// Wear-degree thresholds (ea, units of the backlash b) that set a machine's alert level:
+/// `ok` below `warning`, `warning` below `alarm`, then `alarm`.
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct Thresholds {
+    pub warning: f64,
+    pub alarm: f64,
+}
+
+impl Thresholds {
+    pub fn level(&self, ea: f64) -> &'static str {
+        if ea >= self.alarm {
+            "alarm"
+        } else if ea >= self.warning {
+            "warning"
+        } else {
+            "ok"
+        }
+    }
+}
+
+/// Webhook delivery: retries with exponential back-off, `base · 2^(attempt−1)` capped at
+/// `max_backoff`, up to `max_attempts`.
+#[derive(Debug, Clone)]
+pub struct WebhookSettings {
+    pub max_attempts: i64,
+    pub base_backoff: Duration,
+    pub max_backoff: Duration,
+    /// How often the worker looks for due deliveries when nothing wakes it.
+    pub poll_interval: Duration,
+    /// Timeout of one delivery attempt.
+    pub timeout: Duration,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            address: "127.0.0.1:8080".parse().expect("valid address"),
+            database_url: "gearwear.db".into(),
+            signatures: default_signatures(),
+            open_dashboard: false,
+            log_json: false,
+            limits: Limits {
+                max_body_bytes: 16 << 20,
+                max_samples: 2_097_152,
+                rate_per_second: 50.0,
+                rate_burst: 100.0,
+                request_timeout: Duration::from_secs(15),
+            },
+            thresholds: Thresholds {
+                warning: 0.5,
+                alarm: 0.8,
+            },
+            webhooks: WebhookSettings {
+                max_attempts: 10,
+                base_backoff: Duration::from_secs(2),
+                max_backoff: Duration::from_secs(600),
+                poll_interval: Duration::from_secs(1),
+                timeout: Duration::from_secs(10),
+            },
+            raw_retention: Duration::from_secs(30 * 24 * 3600),
+        }
+    }
+}
+
+/// The committed default signature table.
+pub fn default_signatures() -> PathBuf {
+    let local = PathBuf::from("signatures/model_a_accel.json");
+    if local.exists() {
+        local
+    } else {
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("signatures/model_a_accel.json")
+    }
+}

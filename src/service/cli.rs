@@ -1,0 +1,281 @@
+//! `gearwear serve` and `gearwear keys …`: argument structs and bodies (the `Command` enum in
+//! `crate::cli` only dispatches here).
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, Subcommand};
+
+use super::{AppState, check_exposure, serve};
+use crate::configuration::Settings;
+use crate::keys::{self, Scope};
+use crate::store::{self, KeyRow, now_ms};
+
+/// `gearwear serve`.
+#[derive(Debug, Args, Clone)]
+pub struct ServeArgs {
+    /// Address to listen on. A non-loopback address needs at least one API key.
+    #[arg(long, default_value = "127.0.0.1:8080", env = "GEARWEAR_ADDRESS")]
+    pub address: SocketAddr,
+    /// `postgres://user@host:port/db` for PostgreSQL, else a SQLite file.
+    #[arg(long, env = "DATABASE_URL", default_value = "gearwear.db")]
+    pub database_url: String,
+    /// Signature table (default: the committed `signatures/model_a_accel.json`).
+    #[arg(long, env = "GEARWEAR_SIGNATURES")]
+    pub signatures: Option<PathBuf>,
+    /// Serve with a signature table computed for another model configuration (logged).
+    #[arg(long)]
+    pub allow_stale_table: bool,
+    /// Serve the dashboard and the read endpoints without an API key.
+    #[arg(long, env = "GEARWEAR_OPEN_DASHBOARD")]
+    pub open_dashboard: bool,
+    /// Log JSON lines.
+    #[arg(long, env = "GEARWEAR_LOG_JSON")]
+    pub log_json: bool,
+    /// Largest request body (bytes).
+    #[arg(long, default_value_t = 16 << 20)]
+    pub max_body_bytes: usize,
+    /// Largest record (samples).
+    #[arg(long, default_value_t = 2_097_152)]
+    pub max_samples: usize,
+    /// Requests per second per API key (token bucket refill).
+    #[arg(long, default_value_t = 50.0)]
+    pub rate_per_second: f64,
+    /// Burst per API key (token bucket size).
+    #[arg(long, default_value_t = 100.0)]
+    pub rate_burst: f64,
+    /// Request timeout (seconds).
+    #[arg(long, default_value_t = 15.0)]
+    pub request_timeout_s: f64,
+    /// Days to keep raw samples (0: do not store them).
+    #[arg(long, default_value_t = 30.0)]
+    pub raw_retention_days: f64,
+    /// Wear degree (ea) at which a machine turns `warning`.
+    #[arg(long, default_value_t = 0.5)]
+    pub warning_ea: f64,
+    /// Wear degree (ea) at which a machine turns `alarm`.
+    #[arg(long, default_value_t = 0.8)]
+    pub alarm_ea: f64,
+}
+
+impl ServeArgs {
+    pub fn settings(&self) -> Result<Settings> {
+        let mut s = Settings {
+            address: self.address,
+            database_url: self.database_url.clone(),
+            open_dashboard: self.open_dashboard,
+            log_json: self.log_json,
+            ..Settings::default()
+        };
+        if let Some(p) = &self.signatures {
+            s.signatures = p.clone();
+        }
+        let pos = |name: &str, v: f64| -> Result<f64> {
+            if v.is_finite() && v > 0.0 {
+                Ok(v)
+            } else {
+                bail!("--{name} must be a positive number, got {v}")
+            }
+        };
+        s.limits.max_body_bytes = self.max_body_bytes;
+        s.limits.max_samples = self.max_samples;
+        s.limits.rate_per_second = pos("rate-per-second", self.rate_per_second)?;
+        s.limits.rate_burst = pos("rate-burst", self.rate_burst)?;
+        s.limits.request_timeout =
+            Duration::from_secs_f64(pos("request-timeout-s", self.request_timeout_s)?);
+        if !(self.raw_retention_days >= 0.0 && self.raw_retention_days.is_finite()) {
+            bail!("--raw-retention-days must be ≥ 0");
+        }
+        s.raw_retention = Duration::from_secs_f64(self.raw_retention_days * 86_400.0);
+        if !(self.warning_ea < self.alarm_ea) {
+            bail!("--warning-ea must be below --alarm-ea");
+        }
+        s.thresholds.warning = self.warning_ea;
+        s.thresholds.alarm = self.alarm_ea;
+        Ok(s)
+    }
+}
+
+/// `gearwear keys`.
+#[derive(Debug, Args, Clone)]
+pub struct KeysArgs {
+    #[command(subcommand)]
+    pub command: KeysCommand,
+    /// Store holding the keys (same as `serve --database-url`).
+    #[arg(
+        long,
+        env = "DATABASE_URL",
+        default_value = "gearwear.db",
+        global = true
+    )]
+    pub database_url: String,
+}
+
+#[derive(Debug, Subcommand, Clone)]
+pub enum KeysCommand {
+    /// Create a key and print it once (only its hash is stored).
+    Create {
+        /// Comma-separated scopes: ingest, read, admin.
+        #[arg(long, default_value = "ingest,read")]
+        scope: String,
+        /// A label to recognise the key by.
+        #[arg(long, default_value = "")]
+        label: String,
+    },
+    /// List keys (ids, scopes, labels; never secrets).
+    List,
+    /// Revoke a key by id.
+    Revoke { id: String },
+}
+
+fn runtime() -> Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")
+}
+
+/// Create a key in a store; returns the full token (to show once).
+pub async fn create_key(
+    store: &dyn store::Store,
+    scopes: &[Scope],
+    label: &str,
+) -> Result<(KeyRow, String)> {
+    let k = keys::generate();
+    let row = KeyRow {
+        id: k.id.clone(),
+        hash: k.hash,
+        scopes: scopes.to_vec(),
+        label: label.to_string(),
+        created_at: now_ms(),
+        revoked_at: None,
+    };
+    store.insert_key(&row).await?;
+    Ok((row, k.token))
+}
+
+pub fn keys_cmd(a: KeysArgs) -> Result<()> {
+    runtime()?.block_on(async move {
+        let store = store::connect(&a.database_url)
+            .await
+            .with_context(|| format!("opening the store {}", redact(&a.database_url)))?;
+        match a.command {
+            KeysCommand::Create { scope, label } => {
+                let scopes = Scope::parse_list(&scope).map_err(|w| {
+                    anyhow::anyhow!("unknown scope `{w}`: use ingest, read or admin")
+                })?;
+                if scopes.is_empty() {
+                    bail!("give at least one scope: --scope ingest,read");
+                }
+                let (row, token) = create_key(store.as_ref(), &scopes, &label).await?;
+                eprintln!(
+                    "created key {} with scopes {} — this is the only time it is shown:",
+                    row.id,
+                    Scope::join(&row.scopes)
+                );
+                println!("{token}");
+            }
+            KeysCommand::List => {
+                println!("id\tscopes\tcreated_at\trevoked_at\tlabel");
+                for k in store.list_keys().await? {
+                    println!(
+                        "{}\t{}\t{}\t{}\t{}",
+                        k.id,
+                        Scope::join(&k.scopes),
+                        super::time::rfc3339(k.created_at),
+                        k.revoked_at
+                            .map(super::time::rfc3339)
+                            .unwrap_or_else(|| "-".into()),
+                        k.label
+                    );
+                }
+            }
+            KeysCommand::Revoke { id } => {
+                if store.revoke_key(&id, now_ms()).await? {
+                    eprintln!("revoked key {id}");
+                } else {
+                    bail!("no active key with id {id} (see `gearwear keys list`)");
+                }
+            }
+        }
+        store.close().await;
+        Ok(())
+    })
+}
+
+/// A database URL without its password, for messages.
+pub fn redact(url: &str) -> String {
+    match (url.find("://"), url.rfind('@')) {
+        (Some(s), Some(at)) if at > s => {
+            let creds = &url[s + 3..at];
+            match creds.split_once(':') {
+                Some((user, _)) => format!("{}{user}:***{}", &url[..s + 3], &url[at..]),
+                None => url.to_string(),
+            }
+        }
+        _ => url.to_string(),
+    }
+}
+
+pub fn serve_cmd(a: ServeArgs) -> Result<()> {
+    let settings = a.settings()?;
+    let a_allow_stale = a.allow_stale_table;
+    crate::telemetry::init(settings.log_json);
+    runtime()?.block_on(async move {
+        let store = store::connect(&settings.database_url)
+            .await
+            .with_context(|| format!("opening the store {}", redact(&settings.database_url)))?;
+        check_exposure(&settings.address, store.active_key_count().await?)
+            .map_err(anyhow::Error::msg)?;
+        let diagnoser = super::core::load(&settings.signatures, a_allow_stale)
+            .with_context(|| format!("loading the signature table {}", settings.signatures.display()))?;
+        let listener = tokio::net::TcpListener::bind(settings.address)
+            .await
+            .with_context(|| format!("binding {}", settings.address))?;
+        let addr = listener.local_addr()?;
+        tracing::info!(%addr, store = store.kind(), open_dashboard = settings.open_dashboard, "gearwear serving; dashboard at http://{addr}/");
+        let state = AppState::new(settings, store.clone(), Arc::new(diagnoser));
+        serve(state, listener, shutdown_signal()).await?;
+        store.close().await;
+        tracing::info!("stopped");
+        Ok(())
+    })
+}
+
+/// Ctrl-C or SIGTERM.
+pub async fn shutdown_signal() {
+    let ctrl_c = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    #[cfg(unix)]
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let term = std::future::pending::<()>();
+    tokio::select! {
+        _ = ctrl_c => {}
+        _ = term => {}
+    }
+    tracing::info!("shutdown signal: finishing in-flight requests");
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn passwords_are_redacted() {
+        assert_eq!(
+            super::redact("postgres://u:secret@h:5432/db"),
+            "postgres://u:***@h:5432/db"
+        );
+        assert_eq!(super::redact("gearwear.db"), "gearwear.db");
+    }
+}

@@ -1,0 +1,37 @@
+//! The seam between the HTTP layer and the diagnosis core: the service holds an
+//! `Arc<dyn Diagnoser>` built once at start-up (signature table loaded, matcher prepared) and
+//! calls it from `spawn_blocking`.
+
+use serde_json::Value;
+
+/// A decoded record plus what the request said about it.
+#[derive(Debug, Clone)]
+pub struct Input {
+    pub samples: Vec<f64>,
+    pub sample_rate_hz: f64,
+    pub shaft_hz: Option<f64>,
+    pub sensor: Option<String>,
+}
+
+/// What the service stores and answers for one diagnosis.
+#[derive(Debug, Clone)]
+pub struct Output {
+    /// The same JSON as `gearwear diagnose`.
+    pub diagnosis: Value,
+    pub ea_estimate: f64,
+    pub ea_lower: f64,
+    pub ea_upper: f64,
+    pub motion_state: String,
+    pub f1_hz: f64,
+    /// Named lines to mark on the spectrum: `(name, f / f1)`.
+    pub marks: Vec<(String, f64)>,
+    /// Features stored with the record (lines, condition indicators).
+    pub features: Value,
+}
+
+/// Diagnose one record. Errors are the library's, mapped to problem+json by the caller.
+pub trait Diagnoser: Send + Sync + 'static {
+    fn diagnose(&self, input: &Input) -> crate::Result<Output>;
+    /// Identity of the loaded table (its model hash), for `/readyz`.
+    fn table_id(&self) -> String;
+}

@@ -1,0 +1,165 @@
+//! Prometheus text exposition (format 0.0.4) from in-process counters: no registry crate, the
+//! handful of series the service needs.
+
+use std::collections::BTreeMap;
+use std::fmt::Write;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+/// Upper bounds (seconds) of the request-duration histogram.
+const BUCKETS: [f64; 12] = [
+    0.001, 0.0025, 0.005, 0.01, 0.02, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 10.0,
+];
+
+#[derive(Default)]
+struct Histogram {
+    counts: [u64; BUCKETS.len()],
+    sum: f64,
+    count: u64,
+}
+
+/// The service's counters.
+#[derive(Default)]
+pub struct Metrics {
+    requests: Mutex<BTreeMap<(String, String, u16), u64>>,
+    durations: Mutex<BTreeMap<String, Histogram>>,
+    pub records_accepted: AtomicU64,
+    pub records_replayed: AtomicU64,
+    rejected: Mutex<BTreeMap<String, u64>>,
+    deliveries: Mutex<BTreeMap<String, u64>>,
+}
+
+impl Metrics {
+    pub fn observe(&self, method: &str, route: &str, status: u16, elapsed: Duration) {
+        *self
+            .requests
+            .lock()
+            .unwrap()
+            .entry((method.to_string(), route.to_string(), status))
+            .or_default() += 1;
+        let s = elapsed.as_secs_f64();
+        let mut d = self.durations.lock().unwrap();
+        let h = d.entry(route.to_string()).or_default();
+        for (i, b) in BUCKETS.iter().enumerate() {
+            if s <= *b {
+                h.counts[i] += 1;
+            }
+        }
+        h.sum += s;
+        h.count += 1;
+    }
+
+    pub fn rejected(&self, reason: &str) {
+        *self
+            .rejected
+            .lock()
+            .unwrap()
+            .entry(reason.to_string())
+            .or_default() += 1;
+    }
+
+    pub fn delivery(&self, outcome: &str) {
+        *self
+            .deliveries
+            .lock()
+            .unwrap()
+            .entry(outcome.to_string())
+            .or_default() += 1;
+    }
+
+    /// The exposition text.
+    pub fn render(&self, table_loaded: bool, store_kind: &str) -> String {
+        let mut o = String::new();
+        let _ = writeln!(o, "# HELP gearwear_build_info Version and store backend.");
+        let _ = writeln!(o, "# TYPE gearwear_build_info gauge");
+        let _ = writeln!(
+            o,
+            "gearwear_build_info{{version=\"{}\",store=\"{store_kind}\"}} 1",
+            env!("CARGO_PKG_VERSION")
+        );
+        let _ = writeln!(
+            o,
+            "# HELP gearwear_signature_table_loaded 1 when the table is loaded."
+        );
+        let _ = writeln!(o, "# TYPE gearwear_signature_table_loaded gauge");
+        let _ = writeln!(o, "gearwear_signature_table_loaded {}", table_loaded as u8);
+        let _ = writeln!(
+            o,
+            "# HELP gearwear_http_requests_total HTTP requests by route and status."
+        );
+        let _ = writeln!(o, "# TYPE gearwear_http_requests_total counter");
+        for ((m, r, s), n) in self.requests.lock().unwrap().iter() {
+            let _ = writeln!(
+                o,
+                "gearwear_http_requests_total{{method=\"{m}\",route=\"{r}\",status=\"{s}\"}} {n}"
+            );
+        }
+        let _ = writeln!(
+            o,
+            "# HELP gearwear_http_request_duration_seconds Request latency."
+        );
+        let _ = writeln!(o, "# TYPE gearwear_http_request_duration_seconds histogram");
+        for (r, h) in self.durations.lock().unwrap().iter() {
+            for (i, b) in BUCKETS.iter().enumerate() {
+                let _ = writeln!(
+                    o,
+                    "gearwear_http_request_duration_seconds_bucket{{route=\"{r}\",le=\"{b}\"}} {}",
+                    h.counts[i]
+                );
+            }
+            let _ = writeln!(
+                o,
+                "gearwear_http_request_duration_seconds_bucket{{route=\"{r}\",le=\"+Inf\"}} {}",
+                h.count
+            );
+            let _ = writeln!(
+                o,
+                "gearwear_http_request_duration_seconds_sum{{route=\"{r}\"}} {}",
+                h.sum
+            );
+            let _ = writeln!(
+                o,
+                "gearwear_http_request_duration_seconds_count{{route=\"{r}\"}} {}",
+                h.count
+            );
+        }
+        let _ = writeln!(
+            o,
+            "# HELP gearwear_records_accepted_total Records stored and diagnosed."
+        );
+        let _ = writeln!(o, "# TYPE gearwear_records_accepted_total counter");
+        let _ = writeln!(
+            o,
+            "gearwear_records_accepted_total {}",
+            self.records_accepted.load(Ordering::Relaxed)
+        );
+        let _ = writeln!(
+            o,
+            "# HELP gearwear_records_replayed_total Idempotent replays answered from the store."
+        );
+        let _ = writeln!(o, "# TYPE gearwear_records_replayed_total counter");
+        let _ = writeln!(
+            o,
+            "gearwear_records_replayed_total {}",
+            self.records_replayed.load(Ordering::Relaxed)
+        );
+        let _ = writeln!(
+            o,
+            "# HELP gearwear_records_rejected_total Records refused, by problem type."
+        );
+        let _ = writeln!(o, "# TYPE gearwear_records_rejected_total counter");
+        for (r, n) in self.rejected.lock().unwrap().iter() {
+            let _ = writeln!(o, "gearwear_records_rejected_total{{reason=\"{r}\"}} {n}");
+        }
+        let _ = writeln!(
+            o,
+            "# HELP gearwear_webhook_attempts_total Webhook delivery attempts by outcome."
+        );
+        let _ = writeln!(o, "# TYPE gearwear_webhook_attempts_total counter");
+        for (r, n) in self.deliveries.lock().unwrap().iter() {
+            let _ = writeln!(o, "gearwear_webhook_attempts_total{{outcome=\"{r}\"}} {n}");
+        }
+        o
+    }
+}

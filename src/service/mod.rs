@@ -1,0 +1,244 @@
+//! The wear-diagnosis HTTP service (`gearwear serve`).
+//!
+//! * [`router`] — every route, as a plain function (tests can call it with `oneshot`);
+//! * [`serve`] — run the router on a bound listener until `shutdown` resolves, finishing
+//!   in-flight requests, with the webhook worker and the retention task beside it;
+//! * [`AppState`] — settings, the [`Store`], the [`Diagnoser`], metrics, rate limiter.
+//!
+//! Errors are [`ApiError`]s rendered as `application/problem+json`.
+
+use std::future::Future;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use axum::Router;
+use axum::extract::{MatchedPath, Request, State};
+use axum::http::StatusCode;
+use axum::middleware::{self, Next};
+use axum::response::{IntoResponse, Response};
+use axum::routing::{delete, get, post};
+use tokio::net::TcpListener;
+use tokio::sync::{Notify, watch};
+use tower_http::trace::TraceLayer;
+
+pub mod auth;
+pub mod cli;
+pub mod core;
+pub mod dashboard;
+pub mod diagnoser;
+pub mod error;
+pub mod health;
+pub mod metrics;
+pub mod read;
+pub mod records;
+pub mod spectrum;
+pub mod time;
+pub mod webhooks;
+
+use crate::configuration::Settings;
+use crate::store::Store;
+pub use diagnoser::Diagnoser;
+pub use error::ApiError;
+
+/// Shared state of every handler (cheap to clone).
+#[derive(Clone)]
+pub struct AppState(Arc<Inner>);
+
+pub struct Inner {
+    pub settings: Settings,
+    pub store: Arc<dyn Store>,
+    pub diagnoser: Arc<dyn Diagnoser>,
+    pub metrics: metrics::Metrics,
+    pub limiter: auth::RateLimiter,
+    pub webhook_wake: Notify,
+    pub http: reqwest::Client,
+}
+
+impl std::ops::Deref for AppState {
+    type Target = Inner;
+    fn deref(&self) -> &Inner {
+        &self.0
+    }
+}
+
+impl AppState {
+    pub fn new(settings: Settings, store: Arc<dyn Store>, diagnoser: Arc<dyn Diagnoser>) -> Self {
+        let limiter =
+            auth::RateLimiter::new(settings.limits.rate_per_second, settings.limits.rate_burst);
+        let http = reqwest::Client::builder()
+            .redirect(reqwest::redirect::Policy::none())
+            .build()
+            .expect("HTTP client");
+        AppState(Arc::new(Inner {
+            settings,
+            store,
+            diagnoser,
+            metrics: metrics::Metrics::default(),
+            limiter,
+            webhook_wake: Notify::new(),
+            http,
+        }))
+    }
+}
+
+/// Every route of the service. The list is mirrored by `openapi.yaml`; a test fails when
+/// they drift apart.
+pub fn router(state: AppState) -> Router {
+    let api = Router::new()
+        .route("/v1/machines", get(read::list_machines))
+        .route("/v1/machines/{machine_id}", get(read::get_machine))
+        .route(
+            "/v1/machines/{machine_id}/records",
+            post(records::post_record),
+        )
+        .route(
+            "/v1/machines/{machine_id}/diagnoses",
+            get(read::list_diagnoses),
+        )
+        .route("/v1/diagnoses/{diagnosis_id}", get(read::get_diagnosis))
+        .route("/v1/webhooks", post(webhooks::create).get(webhooks::list))
+        .route("/v1/webhooks/{webhook_id}", delete(webhooks::delete))
+        .route(
+            "/v1/webhooks/{webhook_id}/deliveries",
+            get(webhooks::deliveries),
+        )
+        .route("/healthz", get(health::healthz))
+        .route("/readyz", get(health::readyz))
+        .route("/metrics", get(health::metrics))
+        .route("/", get(dashboard::index))
+        .route("/app.js", get(dashboard::app_js))
+        .route("/style.css", get(dashboard::style));
+    api.fallback(not_found)
+        .method_not_allowed_fallback(method_not_allowed)
+        .layer(middleware::from_fn_with_state(state.clone(), observe))
+        .layer(TraceLayer::new_for_http().make_span_with(|req: &Request| {
+            // Method and path only: never headers (they carry keys).
+            tracing::info_span!("http", method = %req.method(), path = %req.uri().path())
+        }))
+        .with_state(state)
+}
+
+/// The route templates [`router`] serves, as `(METHOD, path)`; the OpenAPI test compares them
+/// with the spec.
+pub const ROUTES: &[(&str, &str)] = &[
+    ("GET", "/v1/machines"),
+    ("GET", "/v1/machines/{machine_id}"),
+    ("POST", "/v1/machines/{machine_id}/records"),
+    ("GET", "/v1/machines/{machine_id}/diagnoses"),
+    ("GET", "/v1/diagnoses/{diagnosis_id}"),
+    ("POST", "/v1/webhooks"),
+    ("GET", "/v1/webhooks"),
+    ("DELETE", "/v1/webhooks/{webhook_id}"),
+    ("GET", "/v1/webhooks/{webhook_id}/deliveries"),
+    ("GET", "/healthz"),
+    ("GET", "/readyz"),
+    ("GET", "/metrics"),
+    ("GET", "/"),
+    ("GET", "/app.js"),
+    ("GET", "/style.css"),
+];
+
+async fn not_found(req: Request) -> ApiError {
+    ApiError::not_found(
+        "not-found",
+        format!(
+            "no route {} {}; see openapi.yaml for the API",
+            req.method(),
+            req.uri().path()
+        ),
+    )
+}
+
+async fn method_not_allowed(req: Request) -> ApiError {
+    ApiError::new(
+        StatusCode::METHOD_NOT_ALLOWED,
+        "method-not-allowed",
+        "Method not allowed",
+        format!(
+            "{} is not allowed on {}; see openapi.yaml",
+            req.method(),
+            req.uri().path()
+        ),
+    )
+}
+
+/// Request timeout and metrics around every request.
+async fn observe(State(app): State<AppState>, req: Request, next: Next) -> Response {
+    let route = req
+        .extensions()
+        .get::<MatchedPath>()
+        .map(|m| m.as_str().to_string())
+        .unwrap_or_else(|| "unmatched".into());
+    let method = req.method().to_string();
+    let started = Instant::now();
+    let limit = app.settings.limits.request_timeout;
+    let resp = match tokio::time::timeout(limit, next.run(req)).await {
+        Ok(r) => r,
+        Err(_) => ApiError::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "request-timeout",
+            "Request timed out",
+            format!(
+                "the request took longer than {} s; if it was a record with an Idempotency-Key, \
+                 retry with the same key",
+                limit.as_secs_f64()
+            ),
+        )
+        .retry_after(1)
+        .into_response(),
+    };
+    app.metrics
+        .observe(&method, &route, resp.status().as_u16(), started.elapsed());
+    resp
+}
+
+/// Is this address allowed with this many active keys? A non-loopback address needs a key,
+/// or anyone on the network could write.
+pub fn check_exposure(addr: &std::net::SocketAddr, active_keys: i64) -> Result<(), String> {
+    if !addr.ip().is_loopback() && active_keys == 0 {
+        Err(format!(
+            "refusing to listen on {addr}, which is not a loopback address, while no API key \
+             exists: create one first with `gearwear keys create --scope ingest,read`"
+        ))
+    } else {
+        Ok(())
+    }
+}
+
+/// Serve until `shutdown` resolves; in-flight requests finish, then the background tasks stop.
+pub async fn serve(
+    state: AppState,
+    listener: TcpListener,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+) -> std::io::Result<()> {
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let worker = tokio::spawn(webhooks::worker(state.clone(), stop_rx.clone()));
+    let retention = tokio::spawn(retention_task(state.clone(), stop_rx));
+    let app = router(state.clone());
+    let res = axum::serve(listener, app)
+        .with_graceful_shutdown(shutdown)
+        .await;
+    let _ = stop_tx.send(true);
+    let _ = worker.await;
+    let _ = retention.await;
+    res
+}
+
+/// Drops raw samples past the retention, hourly.
+async fn retention_task(app: AppState, mut stop: watch::Receiver<bool>) {
+    let keep = app.settings.raw_retention;
+    loop {
+        if !keep.is_zero() {
+            let before = crate::store::now_ms() - keep.as_millis() as i64;
+            match app.store.purge_samples(before).await {
+                Ok(n) if n > 0 => tracing::info!(records = n, "raw samples past retention dropped"),
+                Ok(_) => {}
+                Err(e) => tracing::warn!(error = %e, "retention: store unavailable"),
+            }
+        }
+        tokio::select! {
+            _ = tokio::time::sleep(Duration::from_secs(3600)) => {}
+            _ = stop.changed() => break,
+        }
+    }
+}

@@ -1,0 +1,240 @@
+//! Read endpoints: machines, their diagnoses (cursor pagination, ETag/304), one diagnosis.
+
+use axum::extract::{Path, RawQuery, State};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use base64::Engine;
+use serde::Deserialize;
+use serde_json::{Value, json};
+use sha2::{Digest, Sha256};
+
+use super::AppState;
+use super::auth::Caller;
+use super::error::{ApiError, ApiResult};
+use super::records::check_machine_id;
+use super::time::{parse_rfc3339, rfc3339};
+use crate::store::{DiagnosisRow, MachineRow};
+
+/// How many diagnoses the machine view's wear trend shows.
+const TREND_POINTS: i64 = 200;
+
+/// JSON with a strong ETag over the body; 304 when `If-None-Match` matches.
+pub fn json_with_etag(headers: &HeaderMap, body: &Value) -> Response {
+    let text = body.to_string();
+    let tag = format!(
+        "\"{}\"",
+        &hex::encode(Sha256::digest(text.as_bytes()))[..32]
+    );
+    let matches = headers
+        .get(header::IF_NONE_MATCH)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| v.split(',').any(|t| t.trim() == tag || t.trim() == "*"));
+    let mut r = if matches {
+        StatusCode::NOT_MODIFIED.into_response()
+    } else {
+        let mut r = (StatusCode::OK, text).into_response();
+        r.headers_mut().insert(
+            header::CONTENT_TYPE,
+            HeaderValue::from_static("application/json"),
+        );
+        r
+    };
+    if let Ok(v) = HeaderValue::from_str(&tag) {
+        r.headers_mut().insert(header::ETAG, v);
+    }
+    r.headers_mut()
+        .insert(header::CACHE_CONTROL, HeaderValue::from_static("no-cache"));
+    r
+}
+
+fn machine_summary(m: &MachineRow) -> Value {
+    json!({
+        "id": m.id,
+        "alert_level": m.alert_level,
+        "record_count": m.record_count,
+        "created_at": rfc3339(m.created_at),
+        "updated_at": rfc3339(m.updated_at),
+        "last_diagnosis_id": m.last_diagnosis_id,
+    })
+}
+
+pub fn diagnosis_summary(d: &DiagnosisRow) -> Value {
+    json!({
+        "id": d.id,
+        "machine_id": d.machine_id,
+        "record_id": d.record_id,
+        "created_at": rfc3339(d.created_at),
+        "wear_degree": {"estimate": d.ea_estimate, "lower": d.ea_lower, "upper": d.ea_upper},
+        "alert_level": d.alert_level,
+        "motion_state": d.motion_state,
+    })
+}
+
+fn unknown_machine(id: &str) -> ApiError {
+    ApiError::not_found(
+        "unknown-machine",
+        format!("no machine `{id}`: it has no accepted record yet (machines appear with their first POSTed record)"),
+    )
+    .with("machine_id", id)
+}
+
+pub async fn list_machines(
+    State(app): State<AppState>,
+    caller: Caller,
+    headers: HeaderMap,
+) -> ApiResult<Response> {
+    caller.require_read(&app)?;
+    let ms = app.store.list_machines().await?;
+    let body = json!({"machines": ms.iter().map(machine_summary).collect::<Vec<_>>()});
+    Ok(json_with_etag(&headers, &body))
+}
+
+pub async fn get_machine(
+    State(app): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+) -> ApiResult<Response> {
+    caller.require_read(&app)?;
+    check_machine_id(&id)?;
+    let m = app
+        .store
+        .get_machine(&id)
+        .await?
+        .ok_or_else(|| unknown_machine(&id))?;
+    let trend = app.store.recent_diagnoses(&id, TREND_POINTS).await?;
+    let latest = match &m.last_diagnosis_id {
+        Some(d) => app.store.get_diagnosis(d).await?,
+        None => None,
+    };
+    let latest = latest.map(|d| {
+        let full: Value = serde_json::from_str(&d.body).unwrap_or(Value::Null);
+        let mut s = diagnosis_summary(&d);
+        s["f1_hz"] = full["f1_hz"].clone();
+        s["shaft_hz"] = full["shaft_hz"].clone();
+        s["planetary_clearance_elevated"] = full["planetary_clearance_elevated"].clone();
+        s["warnings"] = full.get("warnings").cloned().unwrap_or(json!([]));
+        s
+    });
+    let mut body = machine_summary(&m);
+    body["thresholds"] = serde_json::to_value(app.settings.thresholds).unwrap_or(Value::Null);
+    body["latest"] = latest.unwrap_or(Value::Null);
+    body["trend"] = trend
+        .iter()
+        .map(|d| {
+            json!({
+                "diagnosis_id": d.id,
+                "created_at": rfc3339(d.created_at),
+                "estimate": d.ea_estimate,
+                "lower": d.ea_lower,
+                "upper": d.ea_upper,
+                "alert_level": d.alert_level,
+            })
+        })
+        .collect::<Vec<_>>()
+        .into();
+    Ok(json_with_etag(&headers, &body))
+}
+
+#[derive(Debug, Default, Deserialize)]
+struct ListQuery {
+    since: Option<String>,
+    cursor: Option<String>,
+    limit: Option<String>,
+}
+
+fn encode_cursor(seq: i64) -> String {
+    base64::engine::general_purpose::URL_SAFE_NO_PAD.encode(format!("d:{seq}"))
+}
+
+fn decode_cursor(c: &str) -> Option<i64> {
+    let b = base64::engine::general_purpose::URL_SAFE_NO_PAD
+        .decode(c)
+        .ok()?;
+    String::from_utf8(b).ok()?.strip_prefix("d:")?.parse().ok()
+}
+
+pub async fn list_diagnoses(
+    State(app): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+    RawQuery(query): RawQuery,
+    headers: HeaderMap,
+) -> ApiResult<Response> {
+    caller.require_read(&app)?;
+    check_machine_id(&id)?;
+    let bad = |p: &'static str, d: String| {
+        ApiError::bad_request("invalid-query", "Invalid query parameter", d).with("parameter", p)
+    };
+    let q: ListQuery = serde_urlencoded::from_str(query.as_deref().unwrap_or(""))
+        .map_err(|e| bad("query", e.to_string()))?;
+    let limit = match &q.limit {
+        None => 50,
+        Some(s) => match s.parse::<i64>() {
+            Ok(n) if (1..=500).contains(&n) => n,
+            _ => {
+                return Err(bad(
+                    "limit",
+                    format!("`limit` must be an integer from 1 to 500, got `{s}`"),
+                ));
+            }
+        },
+    };
+    let since = match &q.since {
+        None => i64::MIN,
+        Some(s) => parse_rfc3339(s).ok_or_else(|| {
+            bad(
+                "since",
+                format!(
+                    "`since` must be an RFC 3339 timestamp such as 2026-11-22T08:30:00Z, got `{s}`"
+                ),
+            )
+        })?,
+    };
+    let after = match &q.cursor {
+        None => 0,
+        Some(c) => decode_cursor(c).ok_or_else(|| {
+            bad(
+                "cursor",
+                "`cursor` must be a `next_cursor` value from an earlier page".into(),
+            )
+        })?,
+    };
+    if app.store.get_machine(&id).await?.is_none() {
+        return Err(unknown_machine(&id));
+    }
+    let rows = app.store.list_diagnoses(&id, after, since, limit).await?;
+    let next = if rows.len() as i64 == limit {
+        rows.last().map(|d| encode_cursor(d.seq))
+    } else {
+        None
+    };
+    let body = json!({
+        "items": rows.iter().map(diagnosis_summary).collect::<Vec<_>>(),
+        "next_cursor": next,
+    });
+    Ok(json_with_etag(&headers, &body))
+}
+
+pub async fn get_diagnosis(
+    State(app): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+) -> ApiResult<Response> {
+    caller.require_read(&app)?;
+    let d = app.store.get_diagnosis(&id).await?.ok_or_else(|| {
+        ApiError::not_found(
+            "unknown-diagnosis",
+            format!(
+                "no diagnosis `{id}`; diagnosis ids are the `id` of a POST …/records answer or \
+                 of an item of GET /v1/machines/{{machine_id}}/diagnoses"
+            ),
+        )
+        .with("diagnosis_id", id.as_str())
+    })?;
+    let mut body = diagnosis_summary(&d);
+    body["diagnosis"] = serde_json::from_str(&d.body).unwrap_or(Value::Null);
+    body["spectrum"] = serde_json::from_str(&d.spectrum).unwrap_or(Value::Null);
+    Ok(json_with_etag(&headers, &body))
+}

@@ -1,0 +1,602 @@
+//! `POST /v1/machines/{machine_id}/records`: decode, diagnose (off the async runtime), store in
+//! one transaction, answer 201 with the diagnosis. `Idempotency-Key` makes retries safe.
+
+use std::sync::atomic::Ordering;
+
+use axum::body::Body;
+use axum::extract::{Path, RawQuery, State};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde::Deserialize;
+use serde_json::{Value, json};
+use sha2::{Digest, Sha256};
+
+use super::AppState;
+use super::auth::Caller;
+use super::diagnoser::Input;
+use super::error::{ApiError, ApiResult};
+use super::spectrum::plot_spectrum;
+use crate::keys::Scope;
+use crate::store::{DiagnosisRow, IdemRow, Ingest, NewRecord, StoreError, new_id, now_ms};
+
+/// Body formats the endpoint takes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BodyFormat {
+    Json,
+    Csv,
+    F32,
+    Wav,
+}
+
+impl BodyFormat {
+    pub fn from_content_type(ct: &str) -> Option<BodyFormat> {
+        let mime = ct
+            .split(';')
+            .next()
+            .unwrap_or("")
+            .trim()
+            .to_ascii_lowercase();
+        match mime.as_str() {
+            "application/json" => Some(BodyFormat::Json),
+            "text/csv" => Some(BodyFormat::Csv),
+            "application/octet-stream" => Some(BodyFormat::F32),
+            "audio/wav" | "audio/x-wav" | "audio/wave" | "audio/vnd.wave" => Some(BodyFormat::Wav),
+            _ => None,
+        }
+    }
+
+    pub fn mime(self) -> &'static str {
+        match self {
+            BodyFormat::Json => "application/json",
+            BodyFormat::Csv => "text/csv",
+            BodyFormat::F32 => "application/octet-stream",
+            BodyFormat::Wav => "audio/wav",
+        }
+    }
+}
+
+/// The JSON body.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JsonRecord {
+    pub sample_rate_hz: f64,
+    pub samples: Vec<f64>,
+    #[serde(default)]
+    pub shaft_hz: Option<f64>,
+    #[serde(default)]
+    pub recorded_at: Option<String>,
+    #[serde(default)]
+    pub sensor: Option<String>,
+}
+
+/// Query parameters (for the non-JSON bodies; `shaft_hz`, `recorded_at`, `sensor` also with
+/// JSON, where the body wins).
+#[derive(Debug, Default, Deserialize)]
+struct RecordQuery {
+    sample_rate_hz: Option<String>,
+    shaft_hz: Option<String>,
+    recorded_at: Option<String>,
+    sensor: Option<String>,
+}
+
+/// Machine ids: 1–64 characters of `A–Z a–z 0–9 . _ -`.
+pub fn check_machine_id(id: &str) -> ApiResult<()> {
+    let ok = !id.is_empty()
+        && id.len() <= 64
+        && id
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'.' || b == b'_' || b == b'-');
+    if ok {
+        Ok(())
+    } else {
+        Err(ApiError::bad_request(
+            "invalid-machine-id",
+            "Invalid machine id",
+            "a machine id is 1 to 64 characters of letters, digits, `.`, `_` and `-`",
+        )
+        .with("machine_id", id))
+    }
+}
+
+fn parse_number(name: &'static str, v: &Option<String>) -> ApiResult<Option<f64>> {
+    match v {
+        None => Ok(None),
+        Some(s) => match s.trim().parse::<f64>() {
+            Ok(x) if x.is_finite() => Ok(Some(x)),
+            _ => Err(ApiError::bad_request(
+                "invalid-query",
+                "Invalid query parameter",
+                format!("query parameter `{name}` must be a finite number, got `{s}`"),
+            )
+            .with("parameter", name)),
+        },
+    }
+}
+
+fn body_too_large(limit: usize) -> ApiError {
+    ApiError::new(
+        StatusCode::PAYLOAD_TOO_LARGE,
+        "body-too-large",
+        "Request body too large",
+        format!(
+            "the body exceeds the limit of {limit} bytes; send a shorter record or a binary \
+             format (application/octet-stream f32 is 4 bytes a sample)"
+        ),
+    )
+    .with("limit_bytes", limit as u64)
+}
+
+/// Read the body, refusing more than `limit` bytes. A refused upload is still read and
+/// discarded (up to 256 MiB or 5 s, nothing kept) before the 413 goes out: a client that is
+/// mid-upload then reads the problem instead of a reset connection ("lingering close").
+pub async fn read_body(headers: &HeaderMap, body: Body, limit: usize) -> ApiResult<bytes_::Bytes> {
+    use http_body_util::BodyExt;
+    const DRAIN_CAP: usize = 256 << 20;
+    let declared = headers
+        .get(header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|s| s.parse::<u64>().ok());
+    let mut too_big = declared.is_some_and(|n| n > limit as u64);
+    let mut buf = Vec::with_capacity(if too_big {
+        0
+    } else {
+        declared.unwrap_or(0).min(limit as u64) as usize
+    });
+    let mut body = body;
+    let mut drained = 0usize;
+    let drain_for = std::time::Duration::from_secs(5);
+    // Only the discarding of a refused upload is time-boxed here; a normal upload is bounded
+    // by the request timeout.
+    let mut deadline = too_big.then(|| tokio::time::Instant::now() + drain_for);
+    loop {
+        let next = match deadline {
+            Some(d) => tokio::time::timeout_at(d, body.frame()).await,
+            None => Ok(body.frame().await),
+        };
+        let frame = match next {
+            Ok(Some(Ok(f))) => f,
+            Ok(None) => break,
+            Ok(Some(Err(e))) => {
+                if too_big {
+                    break;
+                }
+                return Err(ApiError::bad_request(
+                    "body-unreadable",
+                    "Request body could not be read",
+                    format!("the upload broke off: {e}"),
+                ));
+            }
+            Err(_) => break,
+        };
+        let Ok(data) = frame.into_data() else {
+            continue;
+        };
+        if too_big {
+            drained += data.len();
+            if drained > DRAIN_CAP {
+                break;
+            }
+        } else if buf.len() + data.len() > limit {
+            too_big = true;
+            buf = Vec::new();
+            deadline = Some(tokio::time::Instant::now() + drain_for);
+        } else {
+            buf.extend_from_slice(&data);
+        }
+    }
+    if too_big {
+        return Err(body_too_large(limit));
+    }
+    Ok(bytes_::Bytes::from(buf))
+}
+
+mod bytes_ {
+    pub use axum::body::Bytes;
+}
+
+/// Turn a library error from decoding or diagnosing into a problem.
+pub fn problem_from_error(e: &crate::Error) -> ApiError {
+    use crate::Error as E;
+    let un = ApiError::unprocessable;
+    match e {
+        E::RecordFormat { reason, .. } => ApiError::bad_request(
+            "malformed-record",
+            "Malformed record",
+            format!("the body could not be read as the stated format: {reason}"),
+        ),
+        E::NonFiniteSample { index, value } => un(
+            "non-finite-sample",
+            "Non-finite sample",
+            format!(
+                "sample {index} is {value}; every sample must be a finite number (check the \
+                 sensor for dropouts or saturation)"
+            ),
+        )
+        .with("index", *index as u64),
+        E::RecordTooShort {
+            samples,
+            needed_samples,
+            ..
+        } => un("record-too-short", "Record too short", e.to_string())
+            .with("samples", *samples as u64)
+            .with("needed_samples", *needed_samples as u64),
+        E::SampleRateTooLow { needed, .. } => {
+            un("sample-rate-too-low", "Sample rate too low", e.to_string())
+                .with("needed_hz", *needed)
+        }
+        E::NoMeshLine { .. } => un(
+            "no-mesh-line",
+            "No gear-mesh line found",
+            format!("{e}; give `shaft_hz` if the input-shaft speed is known"),
+        ),
+        E::SpeedOutOfBand { .. } => un(
+            "speed-out-of-band",
+            "Operating speed outside the signature table",
+            e.to_string(),
+        ),
+        E::InvalidParameter { name, .. } => {
+            un("invalid-parameter", "Invalid parameter", e.to_string())
+                .with("parameter", name.as_str())
+        }
+        E::Signal(m) => un("unusable-record", "Unusable record", m.clone()),
+        other => {
+            tracing::error!(error = %other, "diagnosis failed");
+            ApiError::internal(format!("the diagnosis failed: {other}"))
+        }
+    }
+}
+
+/// Decode a non-JSON body into samples with the record module's parsers (the same as
+/// `gearwear diagnose` uses for files).
+fn decode_binary(
+    format: BodyFormat,
+    bytes: &[u8],
+    sample_rate: Option<f64>,
+) -> ApiResult<(Vec<f64>, f64)> {
+    use crate::record::{Format, ReadOptions, parse_record};
+    let f = match format {
+        BodyFormat::Csv => Format::Csv,
+        BodyFormat::F32 => Format::F32,
+        BodyFormat::Wav => Format::Wav,
+        BodyFormat::Json => unreachable!("JSON is decoded by serde"),
+    };
+    if sample_rate.is_none() && format == BodyFormat::F32 {
+        return Err(ApiError::bad_request(
+            "malformed-record",
+            "Malformed record",
+            "raw f32 samples carry no sample rate: add `?sample_rate_hz=…` to the URL",
+        ));
+    }
+    let opts = ReadOptions {
+        format: Some(f),
+        sample_rate,
+        column: None,
+    };
+    let r = parse_record(bytes, f, &opts, "body").map_err(|e| {
+        let mut p = problem_from_error(&e);
+        // The parsers speak CLI; a web client sets a query parameter.
+        p.detail = p
+            .detail
+            .replace("--sample-rate HZ", "`?sample_rate_hz=…`")
+            .replace("--sample-rate", "`?sample_rate_hz=…`");
+        p
+    })?;
+    Ok((r.samples, r.sample_rate))
+}
+
+fn f32_bytes(x: &[f64]) -> Vec<u8> {
+    let mut v = Vec::with_capacity(x.len() * 4);
+    for s in x {
+        v.extend_from_slice(&(*s as f32).to_le_bytes());
+    }
+    v
+}
+
+/// The handler.
+pub async fn post_record(
+    State(app): State<AppState>,
+    caller: Caller,
+    Path(machine_id): Path<String>,
+    RawQuery(query): RawQuery,
+    headers: HeaderMap,
+    body: Body,
+) -> Response {
+    match ingest(&app, &caller, &machine_id, query, &headers, body).await {
+        Ok(r) => r,
+        Err(e) => {
+            app.metrics.rejected(e.slug);
+            e.into_response()
+        }
+    }
+}
+
+async fn ingest(
+    app: &AppState,
+    caller: &Caller,
+    machine_id: &str,
+    query: Option<String>,
+    headers: &HeaderMap,
+    body: Body,
+) -> ApiResult<Response> {
+    let limits = &app.settings.limits;
+    if let Err(e) = caller.require(app, Scope::Ingest) {
+        // Read (and drop) the upload so the client sees the 401/403/429, not a reset.
+        let _ = read_body(headers, body, limits.max_body_bytes).await;
+        return Err(e);
+    }
+    check_machine_id(machine_id)?;
+    let ct = headers
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("");
+    let format = BodyFormat::from_content_type(ct).ok_or_else(|| {
+        ApiError::new(
+            StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            "unsupported-media-type",
+            "Unsupported content type",
+            format!(
+                "content type `{ct}` is not a record format; send application/json, text/csv, \
+                 application/octet-stream (little-endian f32) or audio/wav"
+            ),
+        )
+        .with(
+            "accepted",
+            json!([
+                "application/json",
+                "text/csv",
+                "application/octet-stream",
+                "audio/wav"
+            ]),
+        )
+    })?;
+    let q: RecordQuery =
+        serde_urlencoded::from_str(query.as_deref().unwrap_or("")).map_err(|e| {
+            ApiError::bad_request("invalid-query", "Invalid query parameter", e.to_string())
+        })?;
+    let bytes = read_body(headers, body, limits.max_body_bytes).await?;
+
+    // Idempotency: replay the stored answer of an earlier identical request.
+    let idem_key = match headers.get("idempotency-key") {
+        None => None,
+        Some(v) => {
+            let s = v.to_str().ok().filter(|s| !s.is_empty() && s.len() <= 255);
+            Some(
+                s.ok_or_else(|| {
+                    ApiError::bad_request(
+                        "invalid-idempotency-key",
+                        "Invalid Idempotency-Key",
+                        "an Idempotency-Key is 1 to 255 visible ASCII characters (a UUID is a good choice)",
+                    )
+                })?
+                .to_string(),
+            )
+        }
+    };
+    let key_id = caller.key_id.clone().unwrap_or_default();
+    let request_hash = {
+        let mut h = Sha256::new();
+        for part in [
+            machine_id.as_bytes(),
+            format.mime().as_bytes(),
+            query.as_deref().unwrap_or("").as_bytes(),
+        ] {
+            h.update(part);
+            h.update([0u8]);
+        }
+        h.update(&bytes);
+        hex::encode(h.finalize())
+    };
+    if let Some(k) = &idem_key
+        && let Some(prev) = app.store.get_idempotent(&key_id, k).await?
+    {
+        return replay(app, &prev, &request_hash);
+    }
+
+    // Decode.
+    let mut shaft = parse_number("shaft_hz", &q.shaft_hz)?;
+    let mut recorded_at = q.recorded_at.clone();
+    let mut sensor = q.sensor.clone();
+    let (samples, fs) = match format {
+        BodyFormat::Json => {
+            let r: JsonRecord = serde_json::from_slice(&bytes).map_err(|e| {
+                let hint = if bytes.windows(3).any(|w| w == b"NaN") || bytes.windows(8).any(|w| w == b"Infinity") {
+                    " (JSON has no NaN or Infinity: every sample must be a finite number)"
+                } else {
+                    ""
+                };
+                ApiError::bad_request(
+                    "invalid-json",
+                    "Malformed JSON record",
+                    format!(
+                        "the body is not a valid record: {e}{hint}; expected \
+                         {{\"sample_rate_hz\": number, \"samples\": [numbers], \"shaft_hz\"?: number, \
+                         \"recorded_at\"?: RFC 3339 string, \"sensor\"?: string}}"
+                    ),
+                )
+            })?;
+            if r.shaft_hz.is_some() {
+                shaft = r.shaft_hz;
+            }
+            if r.recorded_at.is_some() {
+                recorded_at = r.recorded_at;
+            }
+            if r.sensor.is_some() {
+                sensor = r.sensor;
+            }
+            (r.samples, r.sample_rate_hz)
+        }
+        f => decode_binary(
+            f,
+            &bytes,
+            parse_number("sample_rate_hz", &q.sample_rate_hz)?,
+        )?,
+    };
+    if let Some(t) = &recorded_at
+        && super::time::parse_rfc3339(t).is_none()
+    {
+        return Err(ApiError::bad_request(
+            "invalid-recorded-at",
+            "Invalid recorded_at",
+            format!(
+                "`recorded_at` must be an RFC 3339 timestamp such as 2026-11-22T08:30:00Z, got `{t}`"
+            ),
+        ));
+    }
+    if let Some(s) = &sensor
+        && s.len() > 200
+    {
+        return Err(ApiError::bad_request(
+            "invalid-sensor",
+            "Invalid sensor",
+            "`sensor` is at most 200 characters",
+        ));
+    }
+    if samples.len() > limits.max_samples {
+        return Err(ApiError::new(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            "too-many-samples",
+            "Record too long",
+            format!(
+                "the record has {} samples; the limit is {} — split it into shorter records",
+                samples.len(),
+                limits.max_samples
+            ),
+        )
+        .with("limit_samples", limits.max_samples as u64)
+        .with("samples", samples.len() as u64));
+    }
+    if samples.is_empty() {
+        return Err(ApiError::unprocessable(
+            "empty-record",
+            "Empty record",
+            "the record holds no samples; send at least one second of signal",
+        ));
+    }
+    if let Some((index, v)) = samples.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(ApiError::unprocessable(
+            "non-finite-sample",
+            "Non-finite sample",
+            format!("sample {index} is {v}; every sample must be a finite number (check the sensor for dropouts or saturation)"),
+        )
+        .with("index", index as u64));
+    }
+
+    // Diagnose off the async runtime.
+    let input = Input {
+        samples,
+        sample_rate_hz: fs,
+        shaft_hz: shaft,
+        sensor: sensor.clone(),
+    };
+    let diag = app.diagnoser.clone();
+    let (input, out) = tokio::task::spawn_blocking(move || {
+        let out = diag.diagnose(&input).map(|o| {
+            let sp = plot_spectrum(&input.samples, input.sample_rate_hz, o.f1_hz, &o.marks);
+            (o, sp)
+        });
+        (input, out)
+    })
+    .await
+    .map_err(|e| ApiError::internal(format!("the diagnosis task failed: {e}")))?;
+    let (out, spectrum) = out.map_err(|e| problem_from_error(&e))?;
+
+    // Build everything, then store it in one transaction.
+    let now = now_ms();
+    let record_id = new_id();
+    let diagnosis_id = new_id();
+    let level = app.settings.thresholds.level(out.ea_estimate);
+    let mut response = out.diagnosis.clone();
+    if let Value::Object(m) = &mut response {
+        m.insert("id".into(), diagnosis_id.clone().into());
+        m.insert("machine_id".into(), machine_id.into());
+        m.insert("record_id".into(), record_id.clone().into());
+        m.insert("created_at".into(), super::time::rfc3339(now).into());
+        m.insert("alert_level".into(), level.into());
+    }
+    let response_text = response.to_string();
+    let keep_raw = !app.settings.raw_retention.is_zero();
+    let ing = Ingest {
+        record: NewRecord {
+            id: record_id.clone(),
+            machine_id: machine_id.to_string(),
+            received_at: now,
+            recorded_at,
+            sensor,
+            content_type: format.mime().into(),
+            sample_rate_hz: input.sample_rate_hz,
+            shaft_hz: input.shaft_hz,
+            sample_count: input.samples.len() as i64,
+            sha256: hex::encode(Sha256::digest(&bytes)),
+            features: out.features.to_string(),
+            samples: keep_raw.then(|| f32_bytes(&input.samples)),
+        },
+        diagnosis: DiagnosisRow {
+            seq: 0,
+            id: diagnosis_id.clone(),
+            record_id,
+            machine_id: machine_id.to_string(),
+            created_at: now,
+            ea_estimate: out.ea_estimate,
+            ea_lower: out.ea_lower,
+            ea_upper: out.ea_upper,
+            alert_level: level.into(),
+            motion_state: out.motion_state.clone(),
+            body: out.diagnosis.to_string(),
+            spectrum: serde_json::to_string(&spectrum).unwrap_or_else(|_| "null".into()),
+        },
+        idempotency: idem_key.as_ref().map(|k| IdemRow {
+            key_id: key_id.clone(),
+            idem_key: k.clone(),
+            request_hash: request_hash.clone(),
+            status: 201,
+            response: response_text.clone(),
+        }),
+    };
+    match app.store.ingest(&ing).await {
+        Ok(()) => {}
+        Err(StoreError::Conflict(_)) if idem_key.is_some() => {
+            // A concurrent request with the same key committed first: answer as it did.
+            let k = idem_key.as_deref().unwrap_or_default();
+            if let Some(prev) = app.store.get_idempotent(&key_id, k).await? {
+                return replay(app, &prev, &request_hash);
+            }
+            return Err(ApiError::internal(
+                "idempotency conflict without a stored answer",
+            ));
+        }
+        Err(e) => return Err(e.into()),
+    }
+    app.metrics.records_accepted.fetch_add(1, Ordering::Relaxed);
+    app.webhook_wake.notify_one();
+    tracing::info!(machine = machine_id, diagnosis = %diagnosis_id, ea = out.ea_estimate, level, "record accepted");
+    let mut r = (StatusCode::CREATED, response_text).into_response();
+    let h = r.headers_mut();
+    h.insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static("application/json"),
+    );
+    if let Ok(v) = HeaderValue::from_str(&format!("/v1/diagnoses/{diagnosis_id}")) {
+        h.insert(header::LOCATION, v);
+    }
+    Ok(r)
+}
+
+fn replay(app: &AppState, prev: &IdemRow, request_hash: &str) -> ApiResult<Response> {
+    if prev.request_hash != request_hash {
+        return Err(ApiError::unprocessable(
+            "idempotency-key-reused",
+            "Idempotency-Key reused with a different request",
+            "this Idempotency-Key was already used for a different record; use a new key for a new record",
+        ));
+    }
+    app.metrics.records_replayed.fetch_add(1, Ordering::Relaxed);
+    let status = StatusCode::from_u16(prev.status as u16).unwrap_or(StatusCode::CREATED);
+    let mut r = (status, prev.response.clone()).into_response();
+    r.headers_mut().insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static("application/json"),
+    );
+    r.headers_mut()
+        .insert("idempotent-replayed", HeaderValue::from_static("true"));
+    Ok(r)
+}

@@ -1,0 +1,260 @@
+//! Webhooks for maintenance systems: subscriptions over the API, a delivery queue in the
+//! store, and a background worker that POSTs signed payloads with retries and back-off.
+//!
+//! At-least-once: every event is written to `deliveries` in the same transaction as the
+//! diagnosis that raised it; the worker claims due deliveries with a lease (so replicas sharing
+//! PostgreSQL do not double-send), and a delivery stays `pending` until a 2xx answer is
+//! recorded — a restart in between only means it is sent again. Receivers deduplicate with
+//! the `Gearwear-Delivery` header.
+//!
+//! Signature: `Gearwear-Signature: t=<unix seconds>,v1=<hex HMAC-SHA256(secret, "<t>.<body>")>`.
+
+use std::time::{Duration, Instant};
+
+use axum::Json;
+use axum::body::Body;
+use axum::extract::{Path, State};
+use axum::http::{HeaderMap, StatusCode};
+use axum::response::{IntoResponse, Response};
+use serde::Deserialize;
+use serde_json::{Value, json};
+use tokio::sync::watch;
+
+use super::AppState;
+use super::auth::Caller;
+use super::error::{ApiError, ApiResult};
+use super::records::read_body;
+use super::time::rfc3339;
+use crate::keys::{self, Scope};
+use crate::store::{AttemptRow, DeliveryRow, Outcome, WebhookRow, new_id, now_ms};
+
+/// Events a subscription may ask for.
+pub const EVENTS: [&str; 2] = ["diagnosis.created", "wear.threshold_crossed"];
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct NewWebhook {
+    url: String,
+    events: Vec<String>,
+}
+
+fn webhook_json(w: &WebhookRow) -> Value {
+    json!({"id": w.id, "url": w.url, "events": w.events, "created_at": rfc3339(w.created_at)})
+}
+
+pub async fn create(
+    State(app): State<AppState>,
+    caller: Caller,
+    headers: HeaderMap,
+    body: Body,
+) -> ApiResult<Response> {
+    caller.require(&app, Scope::Admin)?;
+    let bytes = read_body(&headers, body, 64 * 1024).await?;
+    let n: NewWebhook = serde_json::from_slice(&bytes).map_err(|e| {
+        ApiError::bad_request(
+            "invalid-json",
+            "Malformed webhook",
+            format!("{e}; expected {{\"url\": \"https://…\", \"events\": [\"diagnosis.created\", \"wear.threshold_crossed\"]}}"),
+        )
+    })?;
+    let url_ok = (n.url.starts_with("https://") || n.url.starts_with("http://"))
+        && n.url.len() <= 2048
+        && reqwest::Url::parse(&n.url).is_ok();
+    if !url_ok {
+        return Err(ApiError::unprocessable(
+            "invalid-webhook",
+            "Invalid webhook",
+            format!("`url` must be an absolute http(s) URL, got `{}`", n.url),
+        ));
+    }
+    if n.events.is_empty() || n.events.iter().any(|e| !EVENTS.contains(&e.as_str())) {
+        return Err(ApiError::unprocessable(
+            "invalid-webhook",
+            "Invalid webhook",
+            format!(
+                "`events` must be a non-empty list of {EVENTS:?}, got {:?}",
+                n.events
+            ),
+        ));
+    }
+    let mut events = n.events.clone();
+    events.sort();
+    events.dedup();
+    let w = WebhookRow {
+        id: new_id(),
+        url: n.url,
+        secret: keys::webhook_secret(),
+        events,
+        created_at: now_ms(),
+    };
+    app.store.insert_webhook(&w).await?;
+    let mut body = webhook_json(&w);
+    // The signing secret is shown once, here.
+    body["secret"] = w.secret.clone().into();
+    Ok((StatusCode::CREATED, Json(body)).into_response())
+}
+
+pub async fn list(State(app): State<AppState>, caller: Caller) -> ApiResult<Response> {
+    caller.require(&app, Scope::Admin)?;
+    let ws = app.store.list_webhooks().await?;
+    Ok(Json(json!({"webhooks": ws.iter().map(webhook_json).collect::<Vec<_>>()})).into_response())
+}
+
+fn unknown_webhook(id: &str) -> ApiError {
+    ApiError::not_found("unknown-webhook", format!("no webhook `{id}`")).with("webhook_id", id)
+}
+
+pub async fn delete(
+    State(app): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+) -> ApiResult<Response> {
+    caller.require(&app, Scope::Admin)?;
+    if app.store.delete_webhook(&id, now_ms()).await? {
+        Ok(StatusCode::NO_CONTENT.into_response())
+    } else {
+        Err(unknown_webhook(&id))
+    }
+}
+
+fn delivery_json(d: &DeliveryRow, attempts: Vec<AttemptRow>) -> Value {
+    json!({
+        "id": d.id,
+        "event": d.event,
+        "status": d.status,
+        "attempt_count": d.attempts,
+        "created_at": rfc3339(d.created_at),
+        "next_attempt_at": (d.status == "pending").then(|| rfc3339(d.next_attempt_at)),
+        "delivered_at": d.delivered_at.map(rfc3339),
+        "payload": serde_json::from_str::<Value>(&d.payload).unwrap_or(Value::Null),
+        "attempts": attempts.iter().map(|a| json!({
+            "attempt": a.attempt,
+            "attempted_at": rfc3339(a.attempted_at),
+            "status_code": a.status_code,
+            "error": a.error,
+            "duration_ms": a.duration_ms,
+        })).collect::<Vec<_>>(),
+    })
+}
+
+pub async fn deliveries(
+    State(app): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+) -> ApiResult<Response> {
+    caller.require(&app, Scope::Admin)?;
+    if app.store.get_webhook(&id).await?.is_none() {
+        return Err(unknown_webhook(&id));
+    }
+    let ds = app.store.list_deliveries(&id, 100).await?;
+    let mut out = Vec::with_capacity(ds.len());
+    for d in &ds {
+        let a = app.store.list_attempts(&d.id).await?;
+        out.push(delivery_json(d, a));
+    }
+    Ok(Json(json!({"deliveries": out})).into_response())
+}
+
+/// Back-off before attempt `attempt + 1`: `base · 2^(attempt − 1)`, capped.
+pub fn backoff(base: Duration, max: Duration, attempt: i64) -> Duration {
+    let f = 2f64.powi((attempt - 1).clamp(0, 30) as i32);
+    base.mul_f64(f).min(max)
+}
+
+/// The delivery worker: runs until `stop` turns true.
+pub async fn worker(app: AppState, mut stop: watch::Receiver<bool>) {
+    let ws = app.settings.webhooks.clone();
+    let lease_ms = (ws.timeout.as_millis() as i64) * 2 + 1000;
+    loop {
+        if *stop.borrow() {
+            break;
+        }
+        match app.store.claim_deliveries(now_ms(), lease_ms, 32).await {
+            Ok(batch) => {
+                let busy = !batch.is_empty();
+                for (d, w) in batch {
+                    deliver(&app, &d, &w).await;
+                }
+                if busy {
+                    continue;
+                }
+            }
+            Err(e) => tracing::warn!(error = %e, "webhook worker: store unavailable"),
+        }
+        tokio::select! {
+            _ = app.webhook_wake.notified() => {}
+            _ = tokio::time::sleep(ws.poll_interval) => {}
+            _ = stop.changed() => {}
+        }
+    }
+}
+
+async fn deliver(app: &AppState, d: &DeliveryRow, w: &WebhookRow) {
+    let ws = &app.settings.webhooks;
+    let t = now_ms() / 1000;
+    let sig = keys::sign_webhook(&w.secret, t, d.payload.as_bytes());
+    let started = Instant::now();
+    let res = app
+        .http
+        .post(&w.url)
+        .timeout(ws.timeout)
+        .header("content-type", "application/json")
+        .header(
+            "user-agent",
+            concat!("gearwear/", env!("CARGO_PKG_VERSION")),
+        )
+        .header("gearwear-event", &d.event)
+        .header("gearwear-delivery", &d.id)
+        .header("gearwear-signature", sig)
+        .body(d.payload.clone())
+        .send()
+        .await;
+    let attempt = d.attempts + 1;
+    let (code, error) = match &res {
+        Ok(r) => (Some(r.status().as_u16() as i64), None),
+        Err(e) => (None, Some(e.to_string())),
+    };
+    let ok = code.is_some_and(|c| (200..300).contains(&c));
+    let now = now_ms();
+    let outcome = if ok {
+        Outcome::Delivered
+    } else if attempt >= ws.max_attempts {
+        Outcome::Failed
+    } else {
+        Outcome::Retry {
+            next_attempt_at: now
+                + backoff(ws.base_backoff, ws.max_backoff, attempt).as_millis() as i64,
+        }
+    };
+    let a = AttemptRow {
+        delivery_id: d.id.clone(),
+        attempt,
+        attempted_at: now,
+        status_code: code,
+        error: error.or_else(|| (!ok).then(|| format!("HTTP {}", code.unwrap_or(0)))),
+        duration_ms: started.elapsed().as_millis() as i64,
+    };
+    app.metrics.delivery(match outcome {
+        Outcome::Delivered => "delivered",
+        Outcome::Retry { .. } => "retry",
+        Outcome::Failed => "failed",
+    });
+    tracing::info!(delivery = %d.id, webhook = %w.id, event = %d.event, attempt, status = ?code, ok, "webhook attempt");
+    if let Err(e) = app.store.record_attempt(&a, outcome).await {
+        // The lease expires and the delivery is retried: at least once.
+        tracing::warn!(error = %e, delivery = %d.id, "could not record a webhook attempt");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn backoff_doubles_and_caps() {
+        use std::time::Duration;
+        let b = |n| super::backoff(Duration::from_secs(2), Duration::from_secs(60), n);
+        assert_eq!(b(1), Duration::from_secs(2));
+        assert_eq!(b(2), Duration::from_secs(4));
+        assert_eq!(b(4), Duration::from_secs(16));
+        assert_eq!(b(10), Duration::from_secs(60));
+    }
+}

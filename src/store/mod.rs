@@ -1,0 +1,841 @@
+//! Storage of the service: one [`Store`] trait, one implementation per backend.
+//!
+//! * [`sqlite::SqliteStore`] — the default, a single file (`gearwear.db`), no set-up. WAL
+//!   journal with `synchronous = FULL`: a committed transaction survives a crash and a power
+//!   cut.
+//! * [`postgres::PgStore`] — chosen when the database URL starts with `postgres://` (or
+//!   `postgresql://`), so several service replicas can share one store.
+//!
+//! Both run the same SQL text (`$1`-style parameters work on both) from one macro,
+//! [`impl_store!`], with per-backend migrations under `migrations/{sqlite,postgres}`; the
+//! integration tests run the same API tests against both. The only differences live in the
+//! migrations (`BLOB`/`BYTEA`, `AUTOINCREMENT`/`BIGSERIAL`) and the connection options.
+//!
+//! Times are unix milliseconds. A record is acknowledged only after [`Store::ingest`]'s
+//! transaction — machine, record, diagnosis, webhook deliveries, idempotency entry — commits.
+
+use std::sync::Arc;
+
+use async_trait::async_trait;
+use serde::Serialize;
+
+use crate::keys::Scope;
+
+pub mod postgres;
+pub mod sqlite;
+
+/// Storage errors.
+#[derive(Debug, thiserror::Error)]
+pub enum StoreError {
+    /// A unique constraint was hit (an idempotency key used concurrently, a duplicate id).
+    #[error("conflict: {0}")]
+    Conflict(String),
+    /// The database could not be reached or answered with an error.
+    #[error("database: {0}")]
+    Db(#[from] sqlx::Error),
+    /// Migrations failed at start-up.
+    #[error("migration: {0}")]
+    Migrate(#[from] sqlx::migrate::MigrateError),
+}
+
+impl StoreError {
+    /// Is this the database being unreachable (→ 503 + Retry-After) rather than a bug?
+    pub fn is_unavailable(&self) -> bool {
+        matches!(
+            self,
+            StoreError::Db(
+                sqlx::Error::PoolTimedOut
+                    | sqlx::Error::PoolClosed
+                    | sqlx::Error::Io(_)
+                    | sqlx::Error::Tls(_)
+                    | sqlx::Error::Protocol(_)
+                    | sqlx::Error::WorkerCrashed
+            )
+        ) || matches!(self, StoreError::Db(sqlx::Error::Database(e)) if e.code().as_deref() == Some("5") || e.code().as_deref() == Some("57P01"))
+    }
+}
+
+pub type StoreResult<T> = Result<T, StoreError>;
+
+/// An API key as stored (hash only).
+#[derive(Debug, Clone, Serialize)]
+pub struct KeyRow {
+    pub id: String,
+    #[serde(skip)]
+    pub hash: String,
+    pub scopes: Vec<Scope>,
+    pub label: String,
+    pub created_at: i64,
+    pub revoked_at: Option<i64>,
+}
+
+/// A machine and its latest state.
+#[derive(Debug, Clone)]
+pub struct MachineRow {
+    pub id: String,
+    pub created_at: i64,
+    pub updated_at: i64,
+    pub record_count: i64,
+    pub last_diagnosis_id: Option<String>,
+    pub alert_level: String,
+}
+
+/// A diagnosis; `body`/`spectrum` are JSON texts, empty in summaries.
+#[derive(Debug, Clone)]
+pub struct DiagnosisRow {
+    pub seq: i64,
+    pub id: String,
+    pub record_id: String,
+    pub machine_id: String,
+    pub created_at: i64,
+    pub ea_estimate: f64,
+    pub ea_lower: f64,
+    pub ea_upper: f64,
+    pub alert_level: String,
+    pub motion_state: String,
+    pub body: String,
+    pub spectrum: String,
+}
+
+/// An accepted record's metadata, features and (optionally) raw samples.
+#[derive(Debug, Clone)]
+pub struct NewRecord {
+    pub id: String,
+    pub machine_id: String,
+    pub received_at: i64,
+    pub recorded_at: Option<String>,
+    pub sensor: Option<String>,
+    pub content_type: String,
+    pub sample_rate_hz: f64,
+    pub shaft_hz: Option<f64>,
+    pub sample_count: i64,
+    pub sha256: String,
+    /// JSON: lines and condition indicators.
+    pub features: String,
+    /// Little-endian f32 samples, `None` when retention is zero.
+    pub samples: Option<Vec<u8>>,
+}
+
+/// The stored response to an `Idempotency-Key`.
+#[derive(Debug, Clone)]
+pub struct IdemRow {
+    pub key_id: String,
+    pub idem_key: String,
+    /// SHA-256 of the request (machine, content type, query, body).
+    pub request_hash: String,
+    pub status: i64,
+    pub response: String,
+}
+
+/// Everything one accepted record writes, in one transaction.
+#[derive(Debug, Clone)]
+pub struct Ingest {
+    pub record: NewRecord,
+    pub diagnosis: DiagnosisRow,
+    pub idempotency: Option<IdemRow>,
+}
+
+/// A webhook subscription.
+#[derive(Debug, Clone)]
+pub struct WebhookRow {
+    pub id: String,
+    pub url: String,
+    pub secret: String,
+    pub events: Vec<String>,
+    pub created_at: i64,
+}
+
+/// One event to one webhook.
+#[derive(Debug, Clone)]
+pub struct DeliveryRow {
+    pub id: String,
+    pub webhook_id: String,
+    pub event: String,
+    pub payload: String,
+    /// `pending`, `delivered`, `failed`.
+    pub status: String,
+    pub attempts: i64,
+    pub next_attempt_at: i64,
+    pub created_at: i64,
+    pub delivered_at: Option<i64>,
+}
+
+/// One HTTP attempt of a delivery.
+#[derive(Debug, Clone, Serialize)]
+pub struct AttemptRow {
+    #[serde(skip)]
+    pub delivery_id: String,
+    pub attempt: i64,
+    pub attempted_at: i64,
+    pub status_code: Option<i64>,
+    pub error: Option<String>,
+    pub duration_ms: i64,
+}
+
+/// What happened to a delivery after an attempt.
+#[derive(Debug, Clone, Copy)]
+pub enum Outcome {
+    Delivered,
+    Retry { next_attempt_at: i64 },
+    Failed,
+}
+
+/// Alert levels in increasing severity.
+pub const LEVELS: [&str; 4] = ["unknown", "ok", "warning", "alarm"];
+
+pub fn level_rank(level: &str) -> usize {
+    LEVELS.iter().position(|l| *l == level).unwrap_or(0)
+}
+
+/// The webhook events an ingest raises, given the machine's previous alert level:
+/// `diagnosis.created` always, `wear.threshold_crossed` when the level rises to warning or
+/// alarm. Payloads are JSON texts.
+pub fn ingest_events(prev_level: &str, ing: &Ingest, event_id: &str) -> Vec<(String, String)> {
+    let d = &ing.diagnosis;
+    let base = serde_json::json!({
+        "event_id": event_id,
+        "machine_id": d.machine_id,
+        "diagnosis_id": d.id,
+        "record_id": d.record_id,
+        "created_at": crate::service::time::rfc3339(d.created_at),
+        "wear_degree": {"estimate": d.ea_estimate, "lower": d.ea_lower, "upper": d.ea_upper},
+        "alert_level": d.alert_level,
+        "motion_state": d.motion_state,
+    });
+    let mut out = Vec::new();
+    let mut created = base.clone();
+    created["event"] = "diagnosis.created".into();
+    out.push(("diagnosis.created".to_string(), created.to_string()));
+    if level_rank(&d.alert_level) > level_rank(prev_level) && level_rank(&d.alert_level) >= 2 {
+        let mut crossed = base;
+        crossed["event"] = "wear.threshold_crossed".into();
+        crossed["previous_alert_level"] = prev_level.into();
+        out.push(("wear.threshold_crossed".to_string(), crossed.to_string()));
+    }
+    out
+}
+
+/// The storage interface of the service.
+#[async_trait]
+pub trait Store: Send + Sync + 'static {
+    /// `"sqlite"` or `"postgres"`.
+    fn kind(&self) -> &'static str;
+    /// A trivial query: is the database reachable?
+    async fn ping(&self) -> StoreResult<()>;
+    /// Close the pool (after the server stopped).
+    async fn close(&self);
+
+    async fn insert_key(&self, key: &KeyRow) -> StoreResult<()>;
+    async fn get_key(&self, id: &str) -> StoreResult<Option<KeyRow>>;
+    async fn list_keys(&self) -> StoreResult<Vec<KeyRow>>;
+    /// Revoke; `false` if no such (unrevoked) key.
+    async fn revoke_key(&self, id: &str, now: i64) -> StoreResult<bool>;
+    async fn active_key_count(&self) -> StoreResult<i64>;
+
+    async fn get_idempotent(&self, key_id: &str, idem_key: &str) -> StoreResult<Option<IdemRow>>;
+    /// Write an accepted record in one transaction. `StoreError::Conflict` when the
+    /// idempotency key was stored meanwhile by a concurrent request.
+    async fn ingest(&self, ing: &Ingest) -> StoreResult<()>;
+
+    async fn list_machines(&self) -> StoreResult<Vec<MachineRow>>;
+    async fn get_machine(&self, id: &str) -> StoreResult<Option<MachineRow>>;
+    /// Diagnosis summaries (no body) of one machine with `seq > after` and
+    /// `created_at > since`, oldest first.
+    async fn list_diagnoses(
+        &self,
+        machine_id: &str,
+        after: i64,
+        since: i64,
+        limit: i64,
+    ) -> StoreResult<Vec<DiagnosisRow>>;
+    /// The latest `limit` diagnosis summaries of one machine, oldest first.
+    async fn recent_diagnoses(
+        &self,
+        machine_id: &str,
+        limit: i64,
+    ) -> StoreResult<Vec<DiagnosisRow>>;
+    async fn get_diagnosis(&self, id: &str) -> StoreResult<Option<DiagnosisRow>>;
+
+    async fn insert_webhook(&self, w: &WebhookRow) -> StoreResult<()>;
+    async fn list_webhooks(&self) -> StoreResult<Vec<WebhookRow>>;
+    async fn get_webhook(&self, id: &str) -> StoreResult<Option<WebhookRow>>;
+    async fn delete_webhook(&self, id: &str, now: i64) -> StoreResult<bool>;
+    /// Claim up to `limit` due deliveries (pending, `next_attempt_at <= now`) by pushing their
+    /// `next_attempt_at` to `now + lease_ms`, so another replica does not send them meanwhile.
+    async fn claim_deliveries(
+        &self,
+        now: i64,
+        lease_ms: i64,
+        limit: i64,
+    ) -> StoreResult<Vec<(DeliveryRow, WebhookRow)>>;
+    async fn record_attempt(&self, attempt: &AttemptRow, outcome: Outcome) -> StoreResult<()>;
+    async fn list_deliveries(&self, webhook_id: &str, limit: i64) -> StoreResult<Vec<DeliveryRow>>;
+    async fn list_attempts(&self, delivery_id: &str) -> StoreResult<Vec<AttemptRow>>;
+    /// Drop raw samples of records received before `before`; returns how many.
+    async fn purge_samples(&self, before: i64) -> StoreResult<u64>;
+}
+
+/// Open the store a URL names: `postgres://…` / `postgresql://…` → PostgreSQL, anything else
+/// is a SQLite file path (or `sqlite://path`). Runs the migrations.
+pub async fn connect(url: &str) -> StoreResult<Arc<dyn Store>> {
+    if url.starts_with("postgres://") || url.starts_with("postgresql://") {
+        Ok(Arc::new(postgres::PgStore::connect(url).await?))
+    } else {
+        let path = url
+            .strip_prefix("sqlite://")
+            .or_else(|| url.strip_prefix("sqlite:"))
+            .unwrap_or(url);
+        Ok(Arc::new(sqlite::SqliteStore::connect(path).await?))
+    }
+}
+
+/// A new unique id: 26-character ULID (sortable by creation time).
+pub fn new_id() -> String {
+    ulid::Ulid::generate().to_string().to_ascii_lowercase()
+}
+
+/// Current unix time in milliseconds.
+pub fn now_ms() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_millis() as i64)
+        .unwrap_or(0)
+}
+
+/// The shared implementation: the same SQL on both backends. `$db` is the sqlx database type.
+macro_rules! impl_store {
+    ($ty:ty, $db:ty, $kind:literal) => {
+        use sqlx::Row;
+        use $crate::keys::Scope;
+        use $crate::store::*;
+
+        fn key_row(r: &<$db as sqlx::Database>::Row) -> StoreResult<KeyRow> {
+            let scopes: String = r.try_get("scopes")?;
+            Ok(KeyRow {
+                id: r.try_get("id")?,
+                hash: r.try_get("hash")?,
+                scopes: Scope::parse_list(&scopes).unwrap_or_default(),
+                label: r.try_get("label")?,
+                created_at: r.try_get("created_at")?,
+                revoked_at: r.try_get("revoked_at")?,
+            })
+        }
+
+        fn machine_row(r: &<$db as sqlx::Database>::Row) -> StoreResult<MachineRow> {
+            Ok(MachineRow {
+                id: r.try_get("id")?,
+                created_at: r.try_get("created_at")?,
+                updated_at: r.try_get("updated_at")?,
+                record_count: r.try_get("record_count")?,
+                last_diagnosis_id: r.try_get("last_diagnosis_id")?,
+                alert_level: r.try_get("alert_level")?,
+            })
+        }
+
+        fn diagnosis_row(r: &<$db as sqlx::Database>::Row, full: bool) -> StoreResult<DiagnosisRow> {
+            Ok(DiagnosisRow {
+                seq: r.try_get("seq")?,
+                id: r.try_get("id")?,
+                record_id: r.try_get("record_id")?,
+                machine_id: r.try_get("machine_id")?,
+                created_at: r.try_get("created_at")?,
+                ea_estimate: r.try_get("ea_estimate")?,
+                ea_lower: r.try_get("ea_lower")?,
+                ea_upper: r.try_get("ea_upper")?,
+                alert_level: r.try_get("alert_level")?,
+                motion_state: r.try_get("motion_state")?,
+                body: if full { r.try_get("body")? } else { String::new() },
+                spectrum: if full { r.try_get("spectrum")? } else { String::new() },
+            })
+        }
+
+        fn webhook_row(r: &<$db as sqlx::Database>::Row) -> StoreResult<WebhookRow> {
+            let events: String = r.try_get("events")?;
+            Ok(WebhookRow {
+                id: r.try_get("id")?,
+                url: r.try_get("url")?,
+                secret: r.try_get("secret")?,
+                events: events.split(',').filter(|s| !s.is_empty()).map(String::from).collect(),
+                created_at: r.try_get("created_at")?,
+            })
+        }
+
+        fn delivery_row(r: &<$db as sqlx::Database>::Row) -> StoreResult<DeliveryRow> {
+            Ok(DeliveryRow {
+                id: r.try_get("id")?,
+                webhook_id: r.try_get("webhook_id")?,
+                event: r.try_get("event")?,
+                payload: r.try_get("payload")?,
+                status: r.try_get("status")?,
+                attempts: r.try_get("attempts")?,
+                next_attempt_at: r.try_get("next_attempt_at")?,
+                created_at: r.try_get("created_at")?,
+                delivered_at: r.try_get("delivered_at")?,
+            })
+        }
+
+        const SUMMARY_COLS: &str = "seq, id, record_id, machine_id, created_at, ea_estimate, \
+            ea_lower, ea_upper, alert_level, motion_state";
+
+        fn is_unique_violation(e: &sqlx::Error) -> bool {
+            matches!(e, sqlx::Error::Database(d) if d.is_unique_violation())
+        }
+
+        #[async_trait::async_trait]
+        impl Store for $ty {
+            fn kind(&self) -> &'static str {
+                $kind
+            }
+
+            async fn ping(&self) -> StoreResult<()> {
+                sqlx::query("SELECT 1").execute(&self.pool).await?;
+                Ok(())
+            }
+
+            async fn close(&self) {
+                self.pool.close().await;
+            }
+
+            async fn insert_key(&self, k: &KeyRow) -> StoreResult<()> {
+                sqlx::query(
+                    "INSERT INTO api_keys (id, hash, scopes, label, created_at, revoked_at) \
+                     VALUES ($1, $2, $3, $4, $5, $6)",
+                )
+                .bind(&k.id)
+                .bind(&k.hash)
+                .bind(Scope::join(&k.scopes))
+                .bind(&k.label)
+                .bind(k.created_at)
+                .bind(k.revoked_at)
+                .execute(&self.pool)
+                .await?;
+                Ok(())
+            }
+
+            async fn get_key(&self, id: &str) -> StoreResult<Option<KeyRow>> {
+                let r = sqlx::query("SELECT * FROM api_keys WHERE id = $1")
+                    .bind(id)
+                    .fetch_optional(&self.pool)
+                    .await?;
+                r.as_ref().map(key_row).transpose()
+            }
+
+            async fn list_keys(&self) -> StoreResult<Vec<KeyRow>> {
+                let rows = sqlx::query("SELECT * FROM api_keys ORDER BY created_at, id")
+                    .fetch_all(&self.pool)
+                    .await?;
+                rows.iter().map(key_row).collect()
+            }
+
+            async fn revoke_key(&self, id: &str, now: i64) -> StoreResult<bool> {
+                let r = sqlx::query(
+                    "UPDATE api_keys SET revoked_at = $2 WHERE id = $1 AND revoked_at IS NULL",
+                )
+                .bind(id)
+                .bind(now)
+                .execute(&self.pool)
+                .await?;
+                Ok(r.rows_affected() == 1)
+            }
+
+            async fn active_key_count(&self) -> StoreResult<i64> {
+                let r = sqlx::query("SELECT COUNT(*) AS n FROM api_keys WHERE revoked_at IS NULL")
+                    .fetch_one(&self.pool)
+                    .await?;
+                Ok(r.try_get("n")?)
+            }
+
+            async fn get_idempotent(
+                &self,
+                key_id: &str,
+                idem_key: &str,
+            ) -> StoreResult<Option<IdemRow>> {
+                let r = sqlx::query(
+                    "SELECT * FROM idempotency_keys WHERE key_id = $1 AND idem_key = $2",
+                )
+                .bind(key_id)
+                .bind(idem_key)
+                .fetch_optional(&self.pool)
+                .await?;
+                r.map(|r| -> StoreResult<IdemRow> {
+                    Ok(IdemRow {
+                        key_id: r.try_get("key_id")?,
+                        idem_key: r.try_get("idem_key")?,
+                        request_hash: r.try_get("request_hash")?,
+                        status: r.try_get("status")?,
+                        response: r.try_get("response")?,
+                    })
+                })
+                .transpose()
+            }
+
+            async fn ingest(&self, ing: &Ingest) -> StoreResult<()> {
+                let (rec, d) = (&ing.record, &ing.diagnosis);
+                let mut tx = self.pool.begin().await?;
+                // A write first: SQLite then takes its write lock at once (waiting on the busy
+                // timeout) instead of failing to upgrade a read lock later.
+                sqlx::query(
+                    "INSERT INTO machines (id, created_at, updated_at) VALUES ($1, $2, $2) \
+                     ON CONFLICT (id) DO NOTHING",
+                )
+                .bind(&rec.machine_id)
+                .bind(rec.received_at)
+                .execute(&mut *tx)
+                .await?;
+                if let Some(i) = &ing.idempotency {
+                    let r = sqlx::query(
+                        "INSERT INTO idempotency_keys \
+                         (key_id, idem_key, request_hash, status, response, created_at) \
+                         VALUES ($1, $2, $3, $4, $5, $6)",
+                    )
+                    .bind(&i.key_id)
+                    .bind(&i.idem_key)
+                    .bind(&i.request_hash)
+                    .bind(i.status)
+                    .bind(&i.response)
+                    .bind(rec.received_at)
+                    .execute(&mut *tx)
+                    .await;
+                    if let Err(e) = r {
+                        return Err(if is_unique_violation(&e) {
+                            StoreError::Conflict("idempotency key".into())
+                        } else {
+                            e.into()
+                        });
+                    }
+                }
+                let prev: String =
+                    sqlx::query("SELECT alert_level FROM machines WHERE id = $1")
+                        .bind(&rec.machine_id)
+                        .fetch_one(&mut *tx)
+                        .await?
+                        .try_get("alert_level")?;
+                sqlx::query(
+                    "INSERT INTO records (id, machine_id, received_at, recorded_at, sensor, \
+                     content_type, sample_rate_hz, shaft_hz, sample_count, sha256, features, \
+                     samples) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12)",
+                )
+                .bind(&rec.id)
+                .bind(&rec.machine_id)
+                .bind(rec.received_at)
+                .bind(&rec.recorded_at)
+                .bind(&rec.sensor)
+                .bind(&rec.content_type)
+                .bind(rec.sample_rate_hz)
+                .bind(rec.shaft_hz)
+                .bind(rec.sample_count)
+                .bind(&rec.sha256)
+                .bind(&rec.features)
+                .bind(&rec.samples)
+                .execute(&mut *tx)
+                .await?;
+                sqlx::query(
+                    "INSERT INTO diagnoses (id, record_id, machine_id, created_at, ea_estimate, \
+                     ea_lower, ea_upper, alert_level, motion_state, body, spectrum) \
+                     VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11)",
+                )
+                .bind(&d.id)
+                .bind(&d.record_id)
+                .bind(&d.machine_id)
+                .bind(d.created_at)
+                .bind(d.ea_estimate)
+                .bind(d.ea_lower)
+                .bind(d.ea_upper)
+                .bind(&d.alert_level)
+                .bind(&d.motion_state)
+                .bind(&d.body)
+                .bind(&d.spectrum)
+                .execute(&mut *tx)
+                .await?;
+                sqlx::query(
+                    "UPDATE machines SET updated_at = $2, record_count = record_count + 1, \
+                     last_diagnosis_id = $3, alert_level = $4 WHERE id = $1",
+                )
+                .bind(&rec.machine_id)
+                .bind(rec.received_at)
+                .bind(&d.id)
+                .bind(&d.alert_level)
+                .execute(&mut *tx)
+                .await?;
+                let hooks = sqlx::query("SELECT * FROM webhooks WHERE deleted_at IS NULL")
+                    .fetch_all(&mut *tx)
+                    .await?;
+                let event_id = new_id();
+                let events = ingest_events(&prev, ing, &event_id);
+                for h in &hooks {
+                    let h = webhook_row(h)?;
+                    for (event, payload) in &events {
+                        if !h.events.iter().any(|e| e == event || e == "*") {
+                            continue;
+                        }
+                        sqlx::query(
+                            "INSERT INTO deliveries (id, webhook_id, event, payload, status, \
+                             attempts, next_attempt_at, created_at) \
+                             VALUES ($1, $2, $3, $4, 'pending', 0, $5, $5)",
+                        )
+                        .bind(new_id())
+                        .bind(&h.id)
+                        .bind(event)
+                        .bind(payload)
+                        .bind(rec.received_at)
+                        .execute(&mut *tx)
+                        .await?;
+                    }
+                }
+                tx.commit().await.map_err(|e| {
+                    if is_unique_violation(&e) {
+                        StoreError::Conflict("idempotency key".into())
+                    } else {
+                        e.into()
+                    }
+                })?;
+                Ok(())
+            }
+
+            async fn list_machines(&self) -> StoreResult<Vec<MachineRow>> {
+                let rows = sqlx::query("SELECT * FROM machines ORDER BY id")
+                    .fetch_all(&self.pool)
+                    .await?;
+                rows.iter().map(machine_row).collect()
+            }
+
+            async fn get_machine(&self, id: &str) -> StoreResult<Option<MachineRow>> {
+                let r = sqlx::query("SELECT * FROM machines WHERE id = $1")
+                    .bind(id)
+                    .fetch_optional(&self.pool)
+                    .await?;
+                r.as_ref().map(machine_row).transpose()
+            }
+
+            async fn list_diagnoses(
+                &self,
+                machine_id: &str,
+                after: i64,
+                since: i64,
+                limit: i64,
+            ) -> StoreResult<Vec<DiagnosisRow>> {
+                let rows = sqlx::query(sqlx::AssertSqlSafe(format!(
+                    "SELECT {SUMMARY_COLS} FROM diagnoses WHERE machine_id = $1 AND seq > $2 \
+                     AND created_at > $3 ORDER BY seq LIMIT $4"
+                )))
+                .bind(machine_id)
+                .bind(after)
+                .bind(since)
+                .bind(limit)
+                .fetch_all(&self.pool)
+                .await?;
+                rows.iter().map(|r| diagnosis_row(r, false)).collect()
+            }
+
+            async fn recent_diagnoses(
+                &self,
+                machine_id: &str,
+                limit: i64,
+            ) -> StoreResult<Vec<DiagnosisRow>> {
+                let rows = sqlx::query(sqlx::AssertSqlSafe(format!(
+                    "SELECT {SUMMARY_COLS} FROM diagnoses WHERE machine_id = $1 \
+                     ORDER BY seq DESC LIMIT $2"
+                )))
+                .bind(machine_id)
+                .bind(limit)
+                .fetch_all(&self.pool)
+                .await?;
+                let mut v: Vec<DiagnosisRow> = rows
+                    .iter()
+                    .map(|r| diagnosis_row(r, false))
+                    .collect::<StoreResult<_>>()?;
+                v.reverse();
+                Ok(v)
+            }
+
+            async fn get_diagnosis(&self, id: &str) -> StoreResult<Option<DiagnosisRow>> {
+                let r = sqlx::query("SELECT * FROM diagnoses WHERE id = $1")
+                    .bind(id)
+                    .fetch_optional(&self.pool)
+                    .await?;
+                r.as_ref().map(|r| diagnosis_row(r, true)).transpose()
+            }
+
+            async fn insert_webhook(&self, w: &WebhookRow) -> StoreResult<()> {
+                sqlx::query(
+                    "INSERT INTO webhooks (id, url, secret, events, created_at) \
+                     VALUES ($1, $2, $3, $4, $5)",
+                )
+                .bind(&w.id)
+                .bind(&w.url)
+                .bind(&w.secret)
+                .bind(w.events.join(","))
+                .bind(w.created_at)
+                .execute(&self.pool)
+                .await?;
+                Ok(())
+            }
+
+            async fn list_webhooks(&self) -> StoreResult<Vec<WebhookRow>> {
+                let rows = sqlx::query(
+                    "SELECT * FROM webhooks WHERE deleted_at IS NULL ORDER BY created_at, id",
+                )
+                .fetch_all(&self.pool)
+                .await?;
+                rows.iter().map(webhook_row).collect()
+            }
+
+            async fn get_webhook(&self, id: &str) -> StoreResult<Option<WebhookRow>> {
+                let r = sqlx::query("SELECT * FROM webhooks WHERE id = $1 AND deleted_at IS NULL")
+                    .bind(id)
+                    .fetch_optional(&self.pool)
+                    .await?;
+                r.as_ref().map(webhook_row).transpose()
+            }
+
+            async fn delete_webhook(&self, id: &str, now: i64) -> StoreResult<bool> {
+                let mut tx = self.pool.begin().await?;
+                let r = sqlx::query(
+                    "UPDATE webhooks SET deleted_at = $2 WHERE id = $1 AND deleted_at IS NULL",
+                )
+                .bind(id)
+                .bind(now)
+                .execute(&mut *tx)
+                .await?;
+                // Nothing more goes to a deleted subscription.
+                sqlx::query(
+                    "UPDATE deliveries SET status = 'cancelled' \
+                     WHERE webhook_id = $1 AND status = 'pending'",
+                )
+                .bind(id)
+                .execute(&mut *tx)
+                .await?;
+                tx.commit().await?;
+                Ok(r.rows_affected() == 1)
+            }
+
+            async fn claim_deliveries(
+                &self,
+                now: i64,
+                lease_ms: i64,
+                limit: i64,
+            ) -> StoreResult<Vec<(DeliveryRow, WebhookRow)>> {
+                let due = sqlx::query(
+                    "SELECT id FROM deliveries WHERE status = 'pending' AND next_attempt_at <= $1 \
+                     ORDER BY next_attempt_at LIMIT $2",
+                )
+                .bind(now)
+                .bind(limit)
+                .fetch_all(&self.pool)
+                .await?;
+                let mut out = Vec::new();
+                for r in due {
+                    let id: String = r.try_get("id")?;
+                    // Compare-and-set: only one replica wins each delivery.
+                    let c = sqlx::query(
+                        "UPDATE deliveries SET next_attempt_at = $3 \
+                         WHERE id = $1 AND status = 'pending' AND next_attempt_at <= $2",
+                    )
+                    .bind(&id)
+                    .bind(now)
+                    .bind(now + lease_ms)
+                    .execute(&self.pool)
+                    .await?;
+                    if c.rows_affected() != 1 {
+                        continue;
+                    }
+                    let d = sqlx::query("SELECT * FROM deliveries WHERE id = $1")
+                        .bind(&id)
+                        .fetch_one(&self.pool)
+                        .await?;
+                    let d = delivery_row(&d)?;
+                    let w = sqlx::query("SELECT * FROM webhooks WHERE id = $1")
+                        .bind(&d.webhook_id)
+                        .fetch_one(&self.pool)
+                        .await?;
+                    out.push((d, webhook_row(&w)?));
+                }
+                Ok(out)
+            }
+
+            async fn record_attempt(&self, a: &AttemptRow, outcome: Outcome) -> StoreResult<()> {
+                let mut tx = self.pool.begin().await?;
+                let (status, next, delivered) = match outcome {
+                    Outcome::Delivered => ("delivered", a.attempted_at, Some(a.attempted_at)),
+                    Outcome::Retry { next_attempt_at } => ("pending", next_attempt_at, None),
+                    Outcome::Failed => ("failed", a.attempted_at, None),
+                };
+                sqlx::query(
+                    "UPDATE deliveries SET status = $2, attempts = $3, next_attempt_at = $4, \
+                     delivered_at = $5 WHERE id = $1",
+                )
+                .bind(&a.delivery_id)
+                .bind(status)
+                .bind(a.attempt)
+                .bind(next)
+                .bind(delivered)
+                .execute(&mut *tx)
+                .await?;
+                sqlx::query(
+                    "INSERT INTO delivery_attempts (delivery_id, attempt, attempted_at, \
+                     status_code, error, duration_ms) VALUES ($1, $2, $3, $4, $5, $6) \
+                     ON CONFLICT (delivery_id, attempt) DO NOTHING",
+                )
+                .bind(&a.delivery_id)
+                .bind(a.attempt)
+                .bind(a.attempted_at)
+                .bind(a.status_code)
+                .bind(&a.error)
+                .bind(a.duration_ms)
+                .execute(&mut *tx)
+                .await?;
+                tx.commit().await?;
+                Ok(())
+            }
+
+            async fn list_deliveries(
+                &self,
+                webhook_id: &str,
+                limit: i64,
+            ) -> StoreResult<Vec<DeliveryRow>> {
+                let rows = sqlx::query(
+                    "SELECT * FROM deliveries WHERE webhook_id = $1 \
+                     ORDER BY created_at DESC, id DESC LIMIT $2",
+                )
+                .bind(webhook_id)
+                .bind(limit)
+                .fetch_all(&self.pool)
+                .await?;
+                rows.iter().map(delivery_row).collect()
+            }
+
+            async fn list_attempts(&self, delivery_id: &str) -> StoreResult<Vec<AttemptRow>> {
+                let rows = sqlx::query(
+                    "SELECT * FROM delivery_attempts WHERE delivery_id = $1 ORDER BY attempt",
+                )
+                .bind(delivery_id)
+                .fetch_all(&self.pool)
+                .await?;
+                rows.iter()
+                    .map(|r| -> StoreResult<AttemptRow> {
+                        Ok(AttemptRow {
+                            delivery_id: r.try_get("delivery_id")?,
+                            attempt: r.try_get("attempt")?,
+                            attempted_at: r.try_get("attempted_at")?,
+                            status_code: r.try_get("status_code")?,
+                            error: r.try_get("error")?,
+                            duration_ms: r.try_get("duration_ms")?,
+                        })
+                    })
+                    .collect()
+            }
+
+            async fn purge_samples(&self, before: i64) -> StoreResult<u64> {
+                let r = sqlx::query(
+                    "UPDATE records SET samples = NULL \
+                     WHERE received_at < $1 AND samples IS NOT NULL",
+                )
+                .bind(before)
+                .execute(&self.pool)
+                .await?;
+                Ok(r.rows_affected())
+            }
+        }
+    };
+}
+pub(crate) use impl_store;

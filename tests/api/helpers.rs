@@ -1,0 +1,420 @@
+//! `spawn_app`, the stores, records to send, and the OpenAPI response checker.
+
+use std::f64::consts::TAU;
+use std::path::PathBuf;
+use std::sync::{Arc, OnceLock};
+
+use gearwear::configuration::Settings;
+use gearwear::keys::Scope;
+use gearwear::service::core::TableDiagnoser;
+use gearwear::service::{AppState, serve};
+use gearwear::store::{self, Store};
+use serde_json::Value;
+use tokio::sync::oneshot;
+
+/// Which store a test runs against.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Backend {
+    Sqlite,
+    Postgres,
+}
+
+/// Admin connection for creating per-test PostgreSQL databases.
+pub fn pg_admin_url() -> String {
+    std::env::var("GEARWEAR_TEST_POSTGRES")
+        .unwrap_or_else(|_| "postgres://postgres@127.0.0.1:5432/test".into())
+}
+
+pub fn in_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "0" && v != "false")
+}
+
+/// The diagnoser (signature table + matcher), loaded once per test binary.
+pub fn diagnoser() -> Arc<TableDiagnoser> {
+    static D: OnceLock<Arc<TableDiagnoser>> = OnceLock::new();
+    D.get_or_init(|| {
+        Arc::new(
+            gearwear::service::core::load(&gearwear::configuration::default_signatures(), true)
+                .expect("the committed signature table loads"),
+        )
+    })
+    .clone()
+}
+
+/// A fresh database; dropped (PostgreSQL) or deleted (SQLite) with the value.
+pub struct TestDb {
+    pub url: String,
+    backend: Backend,
+    pg_name: Option<String>,
+    dir: Option<PathBuf>,
+}
+
+impl TestDb {
+    /// `None` (after printing why) when PostgreSQL is not reachable and CI is not set.
+    pub async fn new(backend: Backend) -> Option<TestDb> {
+        let tag = uuid::Uuid::new_v4().simple().to_string();
+        match backend {
+            Backend::Sqlite => {
+                let dir = std::env::temp_dir().join(format!("gearwear-test-{tag}"));
+                std::fs::create_dir_all(&dir).unwrap();
+                Some(TestDb {
+                    url: dir.join("gearwear.db").display().to_string(),
+                    backend,
+                    pg_name: None,
+                    dir: Some(dir),
+                })
+            }
+            Backend::Postgres => {
+                let admin = pg_admin_url();
+                let pool = match sqlx::postgres::PgPoolOptions::new()
+                    .max_connections(1)
+                    .acquire_timeout(std::time::Duration::from_secs(3))
+                    .connect(&admin)
+                    .await
+                {
+                    Ok(p) => p,
+                    Err(e) => {
+                        let msg = format!(
+                            "PostgreSQL is not reachable at {admin} ({e}); the PostgreSQL \
+                             half of the service tests did NOT run"
+                        );
+                        if in_ci() {
+                            panic!("{msg} (CI is set, so this is a failure)");
+                        }
+                        eprintln!("SKIP: {msg}");
+                        return None;
+                    }
+                };
+                let name = format!("gw_test_{tag}");
+                sqlx::query(sqlx::AssertSqlSafe(format!("CREATE DATABASE {name}")))
+                    .execute(&pool)
+                    .await
+                    .expect("CREATE DATABASE");
+                pool.close().await;
+                let base = admin.rsplit_once('/').map(|(b, _)| b).unwrap_or(&admin);
+                Some(TestDb {
+                    url: format!("{base}/{name}"),
+                    backend,
+                    pg_name: Some(name),
+                    dir: None,
+                })
+            }
+        }
+    }
+}
+
+impl Drop for TestDb {
+    fn drop(&mut self) {
+        if let Some(dir) = &self.dir {
+            let _ = std::fs::remove_dir_all(dir);
+        }
+        if let Some(name) = self.pg_name.clone() {
+            // Its own thread and runtime: Drop may run inside a runtime.
+            let admin = pg_admin_url();
+            let _ = std::thread::spawn(move || {
+                let rt = tokio::runtime::Builder::new_current_thread()
+                    .enable_all()
+                    .build()
+                    .unwrap();
+                rt.block_on(async {
+                    if let Ok(p) = sqlx::PgPool::connect(&admin).await {
+                        let _ = sqlx::query(sqlx::AssertSqlSafe(format!(
+                            "DROP DATABASE IF EXISTS {name} WITH (FORCE)"
+                        )))
+                        .execute(&p)
+                        .await;
+                        p.close().await;
+                    }
+                });
+            })
+            .join();
+        }
+        let _ = self.backend;
+    }
+}
+
+/// A running service on a random loopback port.
+pub struct TestApp {
+    pub addr: String,
+    pub client: reqwest::Client,
+    pub store: Arc<dyn Store>,
+    pub admin_key: String,
+    pub ingest_key: String,
+    pub read_key: String,
+    pub settings: Settings,
+    shutdown: Option<oneshot::Sender<()>>,
+    task: Option<tokio::task::JoinHandle<std::io::Result<()>>>,
+    // Last: dropped after the server stopped.
+    pub db: Option<TestDb>,
+}
+
+/// Settings for tests: fast webhook retries, generous rate limits.
+pub fn test_settings() -> Settings {
+    let mut s = Settings {
+        address: "127.0.0.1:0".parse().unwrap(),
+        ..Default::default()
+    };
+    s.webhooks.base_backoff = std::time::Duration::from_millis(100);
+    s.webhooks.max_backoff = std::time::Duration::from_millis(400);
+    s.webhooks.poll_interval = std::time::Duration::from_millis(50);
+    s.webhooks.timeout = std::time::Duration::from_secs(2);
+    s.limits.rate_per_second = 1000.0;
+    s.limits.rate_burst = 1000.0;
+    s
+}
+
+/// Start the service on a fresh database; `None` when PostgreSQL is absent outside CI.
+pub async fn spawn_app(backend: Backend, tweak: impl FnOnce(&mut Settings)) -> Option<TestApp> {
+    let db = TestDb::new(backend).await?;
+    let mut settings = test_settings();
+    settings.database_url = db.url.clone();
+    tweak(&mut settings);
+    let store = store::connect(&settings.database_url).await.expect("store");
+    let mk = |scopes: &'static [Scope]| {
+        let store = store.clone();
+        async move {
+            gearwear::service::cli::create_key(store.as_ref(), scopes, "test")
+                .await
+                .unwrap()
+                .1
+        }
+    };
+    let admin_key = mk(&[Scope::Admin]).await;
+    let ingest_key = mk(&[Scope::Ingest]).await;
+    let read_key = mk(&[Scope::Read]).await;
+    let mut app = start(settings, store).await;
+    app.admin_key = admin_key;
+    app.ingest_key = ingest_key;
+    app.read_key = read_key;
+    app.db = Some(db);
+    Some(app)
+}
+
+async fn start(settings: Settings, store: Arc<dyn Store>) -> TestApp {
+    let listener = tokio::net::TcpListener::bind(settings.address)
+        .await
+        .unwrap();
+    let addr = format!("http://{}", listener.local_addr().unwrap());
+    let state = AppState::new(settings.clone(), store.clone(), diagnoser());
+    let (tx, rx) = oneshot::channel::<()>();
+    let task = tokio::spawn(serve(state, listener, async {
+        let _ = rx.await;
+    }));
+    TestApp {
+        addr,
+        client: reqwest::Client::new(),
+        store,
+        admin_key: String::new(),
+        ingest_key: String::new(),
+        read_key: String::new(),
+        settings,
+        shutdown: Some(tx),
+        task: Some(task),
+        db: None,
+    }
+}
+
+impl TestApp {
+    pub fn url(&self, path: &str) -> String {
+        format!("{}{path}", self.addr)
+    }
+
+    /// Stop gracefully (in-flight requests finish).
+    pub async fn stop(&mut self) {
+        if let Some(tx) = self.shutdown.take() {
+            let _ = tx.send(());
+        }
+        if let Some(t) = self.task.take() {
+            t.await.unwrap().unwrap();
+        }
+    }
+
+    /// Stop, then start a new server process-equivalent on the same database.
+    pub async fn restart(&mut self, tweak: impl FnOnce(&mut Settings)) {
+        self.stop().await;
+        self.store.close().await;
+        let mut settings = self.settings.clone();
+        tweak(&mut settings);
+        let store = store::connect(&settings.database_url).await.expect("store");
+        let mut next = start(settings, store).await;
+        next.admin_key = std::mem::take(&mut self.admin_key);
+        next.ingest_key = std::mem::take(&mut self.ingest_key);
+        next.read_key = std::mem::take(&mut self.read_key);
+        next.db = self.db.take();
+        *self = next;
+    }
+
+    pub async fn post_json(&self, machine: &str, body: &Value) -> reqwest::Response {
+        self.client
+            .post(self.url(&format!("/v1/machines/{machine}/records")))
+            .bearer_auth(&self.ingest_key)
+            .json(body)
+            .send()
+            .await
+            .unwrap()
+    }
+
+    pub async fn get(&self, path: &str) -> reqwest::Response {
+        self.client
+            .get(self.url(path))
+            .bearer_auth(&self.read_key)
+            .send()
+            .await
+            .unwrap()
+    }
+}
+
+impl Drop for TestApp {
+    fn drop(&mut self) {
+        if let Some(tx) = self.shutdown.take() {
+            let _ = tx.send(());
+        }
+    }
+}
+
+/// A 1 s synthetic record at 25.6 kHz with the rig's kinematic lines at f1 = Ω1 · 870 Hz
+/// (the diagnosis core finds f1 and answers; its accuracy is tested in `tests/diagnosis.rs`).
+pub fn record_samples(omega1: f64, seconds: f64, seed: u64) -> (Vec<f64>, f64) {
+    let fs = 25_600.0;
+    let f1 = omega1 * 870.0;
+    let n = (fs * seconds) as usize;
+    let mut state = seed.wrapping_add(12345);
+    let x = (0..n)
+        .map(|i| {
+            let t = i as f64 / fs;
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let noise = ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.02;
+            (TAU * f1 * t).sin()
+                + 0.2 * (TAU * 0.36 * f1 * t).sin()
+                + 0.1 * (TAU * 0.72 * f1 * t).sin()
+                + 0.05 * (TAU * 0.0875 * f1 * t).sin()
+                + 0.05 * (TAU * 0.64 * f1 * t).sin()
+                + 0.3 * (TAU * 2.0 * f1 * t).sin()
+                + noise
+        })
+        .collect();
+    (x, fs)
+}
+
+pub fn json_record(seed: u64) -> Value {
+    let (x, fs) = record_samples(1.07, 1.0, seed);
+    serde_json::json!({"sample_rate_hz": fs, "samples": x, "sensor": "test-accel"})
+}
+
+// ---------- OpenAPI ----------
+
+pub fn spec() -> &'static Value {
+    static S: OnceLock<Value> = OnceLock::new();
+    S.get_or_init(|| {
+        let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/openapi.yaml"))
+            .expect("openapi.yaml");
+        serde_yaml::from_str(&text).expect("openapi.yaml parses")
+    })
+}
+
+/// Resolve a local `$ref`.
+fn deref(v: &Value) -> &Value {
+    match v.get("$ref").and_then(|r| r.as_str()) {
+        Some(r) => {
+            let ptr = r.trim_start_matches('#');
+            spec()
+                .pointer(ptr)
+                .unwrap_or_else(|| panic!("dangling $ref {r}"))
+        }
+        None => v,
+    }
+}
+
+/// Check a response against the spec: the status is documented for the operation, the
+/// content type is the documented one, and the body validates against its schema.
+pub fn check_response(method: &str, template: &str, status: u16, content_type: &str, body: &[u8]) {
+    let op = spec()["paths"][template][method.to_ascii_lowercase()].clone();
+    assert!(op.is_object(), "{method} {template} is not in openapi.yaml");
+    let resp = op["responses"].get(status.to_string()).unwrap_or_else(|| {
+        panic!(
+            "{method} {template} answered {status}, which openapi.yaml does not document: {}",
+            String::from_utf8_lossy(body)
+        )
+    });
+    let resp = deref(resp);
+    let Some(content) = resp.get("content").and_then(|c| c.as_object()) else {
+        assert!(
+            body.is_empty(),
+            "{method} {template} {status}: body where the spec has none"
+        );
+        return;
+    };
+    let mime = content_type.split(';').next().unwrap_or("").trim();
+    let media = content.get(mime).unwrap_or_else(|| {
+        panic!(
+            "{method} {template} {status}: content type {mime} not in the spec ({:?})",
+            content.keys().collect::<Vec<_>>()
+        )
+    });
+    if !mime.ends_with("json") {
+        return;
+    }
+    let mut schema = media["schema"].clone();
+    schema["components"] = spec()["components"].clone();
+    let instance: Value = serde_json::from_slice(body).expect("JSON body");
+    let validator = jsonschema::draft202012::new(&schema).expect("schema compiles");
+    let errors: Vec<String> = validator
+        .iter_errors(&instance)
+        .map(|e| format!("{} at {}", e, e.instance_path()))
+        .take(5)
+        .collect();
+    assert!(
+        errors.is_empty(),
+        "{method} {template} {status} does not match openapi.yaml: {errors:#?}\nbody: {}",
+        &String::from_utf8_lossy(body)[..body.len().min(600)]
+    );
+}
+
+/// Send, then check against the spec; returns status, headers and the body.
+pub async fn checked(
+    req: reqwest::RequestBuilder,
+    method: &str,
+    template: &str,
+) -> (u16, reqwest::header::HeaderMap, Vec<u8>) {
+    let r = req.send().await.unwrap();
+    let status = r.status().as_u16();
+    let headers = r.headers().clone();
+    let ct = headers
+        .get("content-type")
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("")
+        .to_string();
+    let body = r.bytes().await.unwrap().to_vec();
+    check_response(method, template, status, &ct, &body);
+    (status, headers, body)
+}
+
+pub fn json(body: &[u8]) -> Value {
+    serde_json::from_slice(body)
+        .unwrap_or_else(|e| panic!("not JSON ({e}): {}", String::from_utf8_lossy(body)))
+}
+
+/// Run one async test body against both stores.
+#[macro_export]
+macro_rules! both_stores {
+    ($($name:ident),* $(,)?) => {
+        mod sqlite {
+            $(
+                #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+                async fn $name() {
+                    super::$name($crate::helpers::Backend::Sqlite).await
+                }
+            )*
+        }
+        mod postgres {
+            $(
+                #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+                async fn $name() {
+                    super::$name($crate::helpers::Backend::Postgres).await
+                }
+            )*
+        }
+    };
+}

@@ -1,0 +1,10 @@
+//! Integration tests of the HTTP service: one binary, one `spawn_app()` (random port, fresh
+//! SQLite file or fresh PostgreSQL database), the same API tests on both stores.
+
+mod helpers;
+
+mod api;
+mod browser;
+mod cli;
+mod openapi;
+mod webhooks;
