@@ -47,6 +47,8 @@ pub enum Command {
     Precompute(crate::diagnosis_cli::PrecomputeArgs),
     /// Estimate the wear degree from an accelerometer record.
     Diagnose(crate::diagnosis_cli::DiagnoseArgs),
+    /// Close the loop: fit, residual, effect attribution, refit (JSON report, plots).
+    Calibrate(crate::closed_loop_cli::CalibrateArgs),
 }
 
 /// Options shared by the simulation commands.
@@ -281,6 +283,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Keys(a) => crate::service::cli::keys_cmd(a),
         Command::Precompute(a) => crate::diagnosis_cli::precompute_cmd(a),
         Command::Diagnose(a) => crate::diagnosis_cli::diagnose_cmd(a),
+        Command::Calibrate(a) => crate::closed_loop_cli::calibrate_cmd(a),
     }
 }
 

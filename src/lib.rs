@@ -22,6 +22,8 @@
 
 pub mod analysis;
 pub mod cli;
+pub mod closed_loop;
+pub mod closed_loop_cli;
 pub mod configuration;
 pub mod diagnosis;
 pub mod diagnosis_cli;

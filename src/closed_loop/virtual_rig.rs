@@ -1,0 +1,175 @@
+//! A virtual test rig: "measured" records from the model plus effects, some of which the
+//! closed loop's library knows and some it does not.
+//!
+//! Signal chain (physical time, sample rate `fs`):
+//! 1. the augmented Model A ([`super::effects::build_model`]: wear `ea`, planetary error,
+//!    eccentricity) simulated from a random initial state after a transient; sensor ẍ̄1;
+//! 2. speed wander (not in the library): the record is read on a warped time axis
+//!    `t' = t + (δ / (2π f_w)) sin(2π f_w t)`, i.e. the speed varies by ±δ at rate `f_w`
+//!    (cubic interpolation);
+//! 3. path resonance: a digital biquad (bilinear transform, pre-warped at the resonance) of
+//!    `H(s) = ω_r² / (s² + 2ζ ω_r s + ω_r²)`;
+//! 4. an unrelated tone (not in the library) `A sin(2π r_t f1 t)` with `A` set `level_db` re the
+//!    f1 line amplitude of the signal so far;
+//! 5. random overall gain, then white Gaussian noise at `snr_db` (noise power = signal AC
+//!    power × 10^(−SNR/10)).
+
+use std::f64::consts::{PI, TAU};
+
+use serde::Serialize;
+
+use super::effects::{ElementParams, build_model};
+use crate::error::{Error, Result};
+use crate::model::ModelAConfig;
+use crate::record::Record;
+use crate::signal::line_amplitude;
+use crate::signature::precompute::{SimOptions, random_initial, simulate_sensor};
+use crate::signature::{SensorQuantity, SplitMix64};
+use crate::solver::Dopri5Options;
+
+/// Which effects the rig switches on (the pipeline under test never sees this).
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct RigEffects {
+    /// Shaft-modulation sideband amplitude on mesh x1 (units of b).
+    pub eccentricity: Option<f64>,
+    /// Path resonance `(ρ = f_r / f1, ζ)`.
+    pub resonance: Option<(f64, f64)>,
+    /// Planetary error amplitude (units of b); `None`: the baseline 0.1.
+    pub planetary: Option<f64>,
+    /// Unrelated tone `(frequency over f1, level dB re the f1 line)`.
+    pub tone: Option<(f64, f64)>,
+    /// Speed wander `(relative depth δ, rate over f1)`.
+    pub speed_wander: Option<(f64, f64)>,
+}
+
+/// A virtual measurement.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct RigSpec {
+    pub ea: f64,
+    pub omega1: f64,
+    /// Hz.
+    pub sample_rate: f64,
+    /// s.
+    pub duration: f64,
+    /// Overall gain (the pipeline must not care).
+    pub gain: f64,
+    /// Signal-to-noise power ratio of the white measurement noise (dB).
+    pub snr_db: f64,
+    pub seed: u64,
+    pub effects: RigEffects,
+}
+
+/// Generate the record of [`RigSpec`] (see the module docs for the chain).
+pub fn generate(cfg: &ModelAConfig, spec: &RigSpec) -> Result<Record> {
+    if !(spec.sample_rate > 0.0 && spec.duration > 0.0 && spec.gain.is_finite()) {
+        return Err(Error::param(
+            "sample rate / duration",
+            spec.sample_rate,
+            "both must be positive",
+        ));
+    }
+    let e = &spec.effects;
+    let model = build_model(
+        cfg,
+        &ElementParams {
+            ea: spec.ea,
+            planetary: e.planetary.unwrap_or(cfg.assumed.planetary_error),
+            eccentricity: e.eccentricity.unwrap_or(0.0),
+        },
+    )?;
+    let fs = spec.sample_rate;
+    let f1 = spec.omega1 * cfg.reference_frequency_hz;
+    let mut rng = SplitMix64::new(spec.seed);
+    let initial = random_initial(model.n(), 2.0, spec.omega1, &mut rng);
+    let transient = 400.0 + rng.range(0.0, 200.0);
+    let samples = (fs * spec.duration).round() as usize;
+    // A margin for the time warp.
+    let extra = if e.speed_wander.is_some() {
+        (0.05 * samples as f64) as usize + 8
+    } else {
+        0
+    };
+    let rec = simulate_sensor(
+        &model,
+        &initial,
+        &SimOptions {
+            omega1: spec.omega1,
+            transient_tau: transient,
+            dt_tau: model.omega_h / fs,
+            samples: samples + 2 * extra,
+            sensor: SensorQuantity::Accel,
+            poincare_every: 0,
+            solver: Dopri5Options::default(),
+        },
+    )?;
+    let mut x: Vec<f64> = match e.speed_wander {
+        None => rec.series,
+        Some((depth, rate)) => {
+            let fw = rate * f1;
+            (0..samples)
+                .map(|n| {
+                    let t = n as f64 / fs;
+                    let tw = t + depth / (TAU * fw) * (TAU * fw * t).sin();
+                    cubic(&rec.series, extra as f64 + tw * fs)
+                })
+                .collect()
+        }
+    };
+    if let Some((rho, zeta)) = e.resonance {
+        biquad_resonance(&mut x, fs, rho * f1, zeta);
+    }
+    if let Some((ratio, level_db)) = e.tone {
+        let a1 = line_amplitude(&x, fs, f1)?;
+        let a = a1 * 10f64.powf(level_db / 20.0);
+        let ph = rng.range(0.0, TAU);
+        for (n, v) in x.iter_mut().enumerate() {
+            *v += a * (TAU * ratio * f1 * n as f64 / fs + ph).sin();
+        }
+    }
+    let n = x.len().max(1) as f64;
+    let mean = x.iter().sum::<f64>() / n;
+    let power = x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
+    let sigma = (power / 10f64.powf(spec.snr_db / 10.0)).sqrt();
+    for v in x.iter_mut() {
+        *v = spec.gain * (*v + sigma * rng.normal());
+    }
+    Ok(Record {
+        samples: x,
+        sample_rate: fs,
+    })
+}
+
+/// Catmull–Rom interpolation of `s` at fractional index `pos` (clamped to the ends).
+fn cubic(s: &[f64], pos: f64) -> f64 {
+    let last = s.len() as isize - 1;
+    let i = pos.floor() as isize;
+    let u = pos - i as f64;
+    let at = |k: isize| s[k.clamp(0, last) as usize];
+    let (p0, p1, p2, p3) = (at(i - 1), at(i), at(i + 1), at(i + 2));
+    0.5 * (2.0 * p1
+        + (-p0 + p2) * u
+        + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * u * u
+        + (-p0 + 3.0 * p1 - 3.0 * p2 + p3) * u * u * u)
+}
+
+/// Filter `x` in place with the bilinear transform (pre-warped at `fr`) of the unit-DC-gain
+/// resonance `ω_r² / (s² + 2ζω_r s + ω_r²)`.
+fn biquad_resonance(x: &mut [f64], fs: f64, fr: f64, zeta: f64) {
+    let w = TAU * fr;
+    let k = w / (PI * fr / fs).tan(); // pre-warp: s = k (z − 1)/(z + 1)
+    let (w2, k2) = (w * w, k * k);
+    let a0 = k2 + 2.0 * zeta * w * k + w2;
+    let b = [w2 / a0, 2.0 * w2 / a0, w2 / a0];
+    let a1 = (2.0 * w2 - 2.0 * k2) / a0;
+    let a2 = (k2 - 2.0 * zeta * w * k + w2) / a0;
+    let (mut x1, mut x2, mut y1, mut y2) = (0.0, 0.0, 0.0, 0.0);
+    for v in x.iter_mut() {
+        let x0 = *v;
+        let y0 = b[0] * x0 + b[1] * x1 + b[2] * x2 - a1 * y1 - a2 * y2;
+        x2 = x1;
+        x1 = x0;
+        y2 = y1;
+        y1 = y0;
+        *v = y0;
+    }
+}
