@@ -11,7 +11,7 @@ use crate::diagnosis::DiagnoseOptions;
 use crate::plot::{Panel, Series, panels};
 use crate::record::{Column, ReadOptions, read_record};
 use crate::signature::SignatureTable;
-use crate::signature::table::DEFAULT_TABLE_PATH;
+use crate::signature::table::default_table_path;
 
 #[derive(Debug, Args)]
 pub struct CalibrateArgs {
@@ -27,9 +27,9 @@ pub struct CalibrateArgs {
     /// CSV column (0-based index or header name) or WAV channel.
     #[arg(long)]
     pub column: Option<String>,
-    /// Signature table.
-    #[arg(long, default_value = DEFAULT_TABLE_PATH)]
-    pub table: PathBuf,
+    /// Signature table (default: the committed `signatures/model_a_accel.json`).
+    #[arg(long)]
+    pub table: Option<PathBuf>,
     /// Write the JSON report here (default: stdout).
     #[arg(long)]
     pub output: Option<PathBuf>,
@@ -40,7 +40,8 @@ pub struct CalibrateArgs {
 
 /// `gearwear calibrate`.
 pub fn calibrate_cmd(a: CalibrateArgs) -> Result<()> {
-    let table = SignatureTable::load(&a.table).context("loading the signature table")?;
+    let table_path = a.table.clone().unwrap_or_else(default_table_path);
+    let table = SignatureTable::load(&table_path).context("loading the signature table")?;
     let record = read_record(
         &a.input,
         &ReadOptions {

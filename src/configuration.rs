@@ -107,10 +107,5 @@ impl Default for Settings {
 
 /// The committed default signature table.
 pub fn default_signatures() -> PathBuf {
-    let local = PathBuf::from("signatures/model_a_accel.json");
-    if local.exists() {
-        local
-    } else {
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("signatures/model_a_accel.json")
-    }
+    crate::signature::table::default_table_path()
 }

@@ -13,7 +13,7 @@ use crate::cli::{RigArgs, parse_range};
 use crate::diagnosis::{DiagnoseOptions, diagnose};
 use crate::record::{Column, Format, ReadOptions, read_record};
 use crate::signature::precompute::{PrecomputeSpec, partial_path, precompute};
-use crate::signature::table::{DEFAULT_TABLE_PATH, Grid, SimulationSettings};
+use crate::signature::table::{DEFAULT_TABLE_PATH, Grid, SimulationSettings, default_table_path};
 use crate::signature::{SensorQuantity, SignatureTable};
 
 /// Sensor quantity on the command line.
@@ -90,9 +90,9 @@ pub struct DiagnoseArgs {
     /// File format (default: from the extension).
     #[arg(long, value_enum)]
     pub format: Option<FormatArg>,
-    /// Signature table.
-    #[arg(long, default_value = DEFAULT_TABLE_PATH)]
-    pub table: PathBuf,
+    /// Signature table (default: the committed `signatures/model_a_accel.json`).
+    #[arg(long)]
+    pub table: Option<PathBuf>,
     /// Credible level of the wear interval.
     #[arg(long, default_value_t = DiagnoseOptions::default().credible_level)]
     pub level: f64,
@@ -203,10 +203,11 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
         planetary_error: None,
     }
     .load()?;
-    let table = SignatureTable::load(&a.table).with_context(|| {
+    let table_path = a.table.clone().unwrap_or_else(default_table_path);
+    let table = SignatureTable::load(&table_path).with_context(|| {
         format!(
             "loading the signature table (regenerate with `gearwear precompute --output {}`)",
-            a.table.display()
+            table_path.display()
         )
     })?;
     if let Err(e) = table.check_model(&cfg) {

@@ -34,7 +34,7 @@ pub enum Error {
     #[error("plot {path}: {reason}")]
     Plot { path: String, reason: String },
     /// File I/O.
-    #[error("{path}: {source}")]
+    #[error("cannot read or write {path}")]
     Io {
         path: String,
         #[source]

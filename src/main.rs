@@ -1,5 +1,14 @@
+use std::process::ExitCode;
+
 use clap::Parser;
 
-fn main() -> anyhow::Result<()> {
-    gearwear::cli::run(gearwear::cli::Cli::parse())
+fn main() -> ExitCode {
+    match gearwear::cli::run(gearwear::cli::Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            // One line per cause, most specific last: what failed and why, no backtrace.
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
 }

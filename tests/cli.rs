@@ -180,3 +180,75 @@ fn bad_arguments_get_clear_errors() {
     let (ok, _, err) = gearwear(&["model", "--config", "/nonexistent/rig.toml"]);
     assert!(!ok && err.contains("/nonexistent/rig.toml"), "{err}");
 }
+
+#[test]
+fn synth_then_diagnose_round_trip_through_files() {
+    let dir = tmpdir("synth");
+    let wav = dir.join("rec.wav");
+    let (ok, _, err) = gearwear(&[
+        "synth",
+        "--ea",
+        "0.7",
+        "--seed",
+        "7",
+        "--gain",
+        "3.5",
+        "--output",
+        wav.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    for args in [vec!["--shaft-hz", "30"], vec![]] {
+        let mut a = vec!["diagnose", "--input", wav.to_str().unwrap()];
+        a.extend(args.iter());
+        let (ok, out, err) = gearwear(&a);
+        assert!(ok, "{err}");
+        let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+        let w = &v["wear_degree"];
+        let (est, lo, hi) = (
+            w["estimate"].as_f64().unwrap(),
+            w["lower"].as_f64().unwrap(),
+            w["upper"].as_f64().unwrap(),
+        );
+        assert!(lo <= est && est <= hi);
+        assert!(
+            (est - 0.7).abs() < 0.1,
+            "estimate {est} [{lo}, {hi}] for ea 0.7 ({args:?})"
+        );
+        assert!((v["f1_hz"].as_f64().unwrap() - 870.0).abs() < 2.0);
+    }
+    // The same samples as CSV give the same answer.
+    let csv = dir.join("rec.csv");
+    let (ok, _, err) = gearwear(&[
+        "synth",
+        "--ea",
+        "0.7",
+        "--seed",
+        "7",
+        "--gain",
+        "3.5",
+        "--output",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let (ok, out, err) = gearwear(&[
+        "diagnose",
+        "--input",
+        csv.to_str().unwrap(),
+        "--sample-rate",
+        "25600",
+        "--shaft-hz",
+        "30",
+    ]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert!((v["wear_degree"]["estimate"].as_f64().unwrap() - 0.7).abs() < 0.1);
+    let (ok, _, err) = gearwear(&[
+        "synth",
+        "--ea",
+        "0.7",
+        "--output",
+        dir.join("rec.mp3").to_str().unwrap(),
+    ]);
+    assert!(!ok && err.contains(".wav"), "{err}");
+    std::fs::remove_dir_all(dir).ok();
+}

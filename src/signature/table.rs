@@ -25,6 +25,18 @@ pub const VERSION: u32 = 1;
 /// The committed default table (`signatures/model_a_accel.json`).
 pub const DEFAULT_TABLE_PATH: &str = "signatures/model_a_accel.json";
 
+/// Where the default table is: `signatures/model_a_accel.json` under the working directory when
+/// it exists (a checkout, a container with the file copied), else the one in the source tree the
+/// binary was built from.
+pub fn default_table_path() -> std::path::PathBuf {
+    let local = std::path::PathBuf::from(DEFAULT_TABLE_PATH);
+    if local.exists() {
+        local
+    } else {
+        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(DEFAULT_TABLE_PATH)
+    }
+}
+
 /// SHA-256 (hex) of the model configuration's canonical JSON (`serde_json` of
 /// [`ModelAConfig`], fields in declaration order, no whitespace). Any change of a parameter
 /// changes the hash.
