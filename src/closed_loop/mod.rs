@@ -21,6 +21,7 @@
 //! 7. **Unexplained**: runs of the final residual beyond ±[`CalibrateOptions::unexplained_db`].
 
 pub mod effects;
+pub mod held;
 pub mod spectrum;
 pub mod virtual_rig;
 
@@ -764,5 +765,101 @@ pub fn calibrate(
         },
         diagnosis_warnings: d.warnings.clone(),
         options: opts.clone(),
+    })
+}
+
+/// The wear re-estimated with a machine's calibrated effects held fixed ([`refit_held`]).
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct HeldRefit {
+    /// Fixed-axis wear `ea` of the best simulation (grid 0.1, 0.15, …, 1.0 plus the start).
+    pub ea: f64,
+    /// Planetary error and shaft-modulation amplitude the model held (units of b).
+    pub planetary_error_b: f64,
+    pub eccentricity_b: f64,
+    /// RMS log-spectral distance (dB) of the model with the held effects at `ea`.
+    pub error_db: f64,
+    /// The same for the plain model at the start value (the uncalibrated diagnosis).
+    pub error_plain_db: f64,
+    pub f1_hz: f64,
+    pub omega1: f64,
+}
+
+/// Re-estimate the wear of `record` with `held` in the model: element effects in the
+/// assembly, a path resonance as a fixed sensor stage (its Hz frequency mapped to `f1`).
+/// `ea` is refined by simulation over the same grid as [`calibrate`], gain and noise floor by
+/// Levenberg–Marquardt; nothing about the effects is re-fitted.
+pub fn refit_held(
+    record: &Record,
+    table: &SignatureTable,
+    opts: &CalibrateOptions,
+    f1: f64,
+    omega1: f64,
+    ea_start: f64,
+    held: &held::HeldEffects,
+) -> Result<HeldRefit> {
+    let cfg = &table.model;
+    let (olo, ohi) = table.omega_band();
+    let omega1 = omega1.clamp(olo, ohi);
+    let r = grid();
+    let m = log_spectrum(&record.samples, record.sample_rate, f1)?;
+    let j_n = m.len() as f64;
+    let sim = Simulator {
+        cfg,
+        omega1,
+        periods: opts.sim_periods,
+        seed: opts.sim_seed,
+        cache: Mutex::new(HashMap::new()),
+    };
+    let baseline = cfg.assumed.planetary_error;
+    let p0 = ElementParams {
+        ea: ea_start,
+        planetary: baseline,
+        eccentricity: 0.0,
+    };
+    let s0 = sim.spectrum(&p0)?;
+    let (sens0, _) = fit_sensor(&m, &s0, &r, None);
+    let error_plain_db = rms_distance(&m, &sensor_model(&s0, &r, &sens0));
+    let res = held.resonance_at(f1);
+    let base = ElementParams {
+        ea: ea_start,
+        planetary: held.planetary_error_b.unwrap_or(baseline),
+        eccentricity: held.eccentricity_b,
+    };
+    let mut eas: Vec<f64> = (0..EA_GRID_N).map(|k| 0.1 + 0.05 * k as f64).collect();
+    eas.push(ea_start);
+    let fits: Vec<Result<(f64, f64)>> = eas
+        .par_iter()
+        .map(|&ea| {
+            let s = sim.spectrum(&ElementParams { ea, ..base })?;
+            let hs: Vec<f64> = match res {
+                Some(h) => s.iter().zip(&r).map(|(a, b)| a + h.gain_db(*b)).collect(),
+                None => s,
+            };
+            let (_, rss) = fit_sensor(&m, &hs, &r, None);
+            Ok((ea, rss))
+        })
+        .collect();
+    let mut best: Option<(f64, f64)> = None;
+    for f in fits {
+        let f = f?;
+        if best.is_none_or(|b| f.1 < b.1) {
+            best = Some(f);
+        }
+    }
+    let (ea, rss) = best.expect("non-empty ea grid");
+    let error_db = (rss / j_n).sqrt();
+    if !(error_db.is_finite() && error_plain_db.is_finite()) {
+        return Err(Error::Signal(
+            "the refit with the calibrated effects produced a non-finite error".into(),
+        ));
+    }
+    Ok(HeldRefit {
+        ea,
+        planetary_error_b: base.planetary,
+        eccentricity_b: base.eccentricity,
+        error_db,
+        error_plain_db,
+        f1_hz: f1,
+        omega1,
     })
 }

@@ -7,7 +7,9 @@ use std::path::Path;
 use anyhow::Context;
 use serde_json::json;
 
-use super::diagnoser::{Diagnoser, Input, Output};
+use super::diagnoser::{Diagnoser, Input, MachineCalibration, Output};
+use crate::closed_loop::held::{HeldEffects, MAX_CORRECTION_DB, decolour};
+use crate::closed_loop::{CalibrateOptions, calibrate, refit_held};
 use crate::diagnosis::{DiagnoseOptions, Matcher, diagnose_with};
 use crate::model::ModelAConfig;
 use crate::record::Record;
@@ -50,17 +52,136 @@ pub fn load(path: &Path, allow_stale: bool) -> anyhow::Result<TableDiagnoser> {
     Ok(TableDiagnoser::new(table, DiagnoseOptions::default())?)
 }
 
+/// The effects of a stored calibration (name + parameters of each).
+fn held_effects(cal: &MachineCalibration) -> crate::Result<HeldEffects> {
+    let list = cal.effects.as_array().cloned().unwrap_or_default();
+    let parsed: Vec<(String, std::collections::BTreeMap<String, f64>)> = list
+        .iter()
+        .map(|e| {
+            let name = e["name"].as_str().unwrap_or("").to_string();
+            let params = serde_json::from_value(e["parameters"].clone()).map_err(|err| {
+                crate::Error::Signal(format!("stored effect `{name}` unreadable: {err}"))
+            })?;
+            Ok((name, params))
+        })
+        .collect::<crate::Result<_>>()?;
+    HeldEffects::from_effects(parsed.iter().map(|(n, p)| (n.as_str(), p)))
+}
+
+impl TableDiagnoser {
+    fn options(&self, input: &Input) -> DiagnoseOptions {
+        let mut opts = self.opts.clone();
+        opts.shaft_hz = input.shaft_hz;
+        opts
+    }
+
+    /// The `calibration` object of a calibrated machine's diagnosis, and warnings to add.
+    /// `rec` is the record as measured, `d` the diagnosis of the (de-coloured) record.
+    fn calibration_json(
+        &self,
+        cal: &MachineCalibration,
+        held: &HeldEffects,
+        rec: &Record,
+        d: &crate::diagnosis::Diagnosis,
+        opts: &DiagnoseOptions,
+    ) -> crate::Result<(serde_json::Value, Vec<String>)> {
+        let mut warnings = Vec::new();
+        let (path_correction, uncorrected) = match held.path_resonance {
+            Some((fr, zeta)) => {
+                let d0 = diagnose_with(rec, &self.table, &self.matcher, opts)?;
+                (
+                    json!({"frequency_hz": fr, "damping_ratio": zeta,
+                           "max_correction_db": MAX_CORRECTION_DB}),
+                    json!({"estimate": d0.wear_degree.estimate, "lower": d0.wear_degree.lower,
+                           "upper": d0.wear_degree.upper}),
+                )
+            }
+            None => (serde_json::Value::Null, serde_json::Value::Null),
+        };
+        let refit = if held.is_empty() {
+            serde_json::Value::Null
+        } else {
+            let copts = CalibrateOptions {
+                diagnose: opts.clone(),
+                ..CalibrateOptions::default()
+            };
+            match refit_held(
+                rec,
+                &self.table,
+                &copts,
+                d.f1_hz,
+                d.omega1,
+                d.wear_degree.estimate,
+                held,
+            ) {
+                Ok(r) => {
+                    if r.error_db >= r.error_plain_db {
+                        warnings.push(format!(
+                            "the calibrated effects do not lower this record's model error \
+                             ({:.2} dB with them, {:.2} dB without): the calibration may no longer \
+                             apply; recalibrate the machine",
+                            r.error_db, r.error_plain_db
+                        ));
+                    }
+                    serde_json::to_value(r).unwrap_or_default()
+                }
+                Err(e) => {
+                    warnings.push(format!(
+                        "the refit with the calibrated effects failed ({e}); wear_refit is null"
+                    ));
+                    serde_json::Value::Null
+                }
+            }
+        };
+        Ok((
+            json!({
+                "id": cal.id,
+                "calibrated_at": cal.calibrated_at,
+                "effects": cal.effects,
+                "path_correction": path_correction,
+                "uncorrected_wear_degree": uncorrected,
+                "wear_refit": refit,
+            }),
+            warnings,
+        ))
+    }
+}
+
 impl Diagnoser for TableDiagnoser {
     fn diagnose(&self, input: &Input) -> crate::Result<Output> {
         let rec = Record {
             samples: input.samples.clone(),
             sample_rate: input.sample_rate_hz,
         };
-        let mut opts = self.opts.clone();
-        opts.shaft_hz = input.shaft_hz;
-        let d = diagnose_with(&rec, &self.table, &self.matcher, &opts)?;
-        let diagnosis =
+        let opts = self.options(input);
+        let held = input
+            .calibration
+            .as_ref()
+            .map(|c| held_effects(c).map(|h| (c, h)))
+            .transpose()?;
+        // A path stage is divided out of the spectrum before the ordinary feature extraction.
+        let corrected = match held.as_ref().and_then(|(_, h)| h.path_resonance) {
+            Some((fr, zeta)) => Some(Record {
+                samples: decolour(&rec.samples, rec.sample_rate, fr, zeta)?,
+                sample_rate: rec.sample_rate,
+            }),
+            None => None,
+        };
+        let d = diagnose_with(
+            corrected.as_ref().unwrap_or(&rec),
+            &self.table,
+            &self.matcher,
+            &opts,
+        )?;
+        let mut diagnosis =
             serde_json::to_value(&d).map_err(|e| crate::Error::Signal(e.to_string()))?;
+        if let Some((cal, h)) = &held {
+            let (c, warnings) = self.calibration_json(cal, h, &rec, &d, &opts)?;
+            diagnosis["calibration"] = c;
+            if let Some(w) = diagnosis["warnings"].as_array_mut() {
+                w.extend(warnings.into_iter().map(Into::into));
+            }
+        }
         Ok(Output {
             ea_estimate: d.wear_degree.estimate,
             ea_lower: d.wear_degree.lower,
@@ -80,6 +201,19 @@ impl Diagnoser for TableDiagnoser {
             }),
             diagnosis,
         })
+    }
+
+    fn calibrate(&self, input: &Input) -> crate::Result<serde_json::Value> {
+        let rec = Record {
+            samples: input.samples.clone(),
+            sample_rate: input.sample_rate_hz,
+        };
+        let opts = CalibrateOptions {
+            diagnose: self.options(input),
+            ..CalibrateOptions::default()
+        };
+        let report = calibrate(&rec, &self.table, &opts)?;
+        serde_json::to_value(&report).map_err(|e| crate::Error::Signal(e.to_string()))
     }
 
     fn table_id(&self) -> String {

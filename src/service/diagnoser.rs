@@ -11,6 +11,18 @@ pub struct Input {
     pub sample_rate_hz: f64,
     pub shaft_hz: Option<f64>,
     pub sensor: Option<String>,
+    /// The machine's stored calibration, if it has one: the diagnosis then uses it.
+    pub calibration: Option<MachineCalibration>,
+}
+
+/// A machine's current calibration as later diagnoses hold it.
+#[derive(Debug, Clone)]
+pub struct MachineCalibration {
+    pub id: String,
+    /// RFC 3339.
+    pub calibrated_at: String,
+    /// The accepted effects, `[{name, kind, parameters}]` as stored.
+    pub effects: Value,
 }
 
 /// What the service stores and answers for one diagnosis.
@@ -32,6 +44,8 @@ pub struct Output {
 /// Diagnose one record. Errors are the library's, mapped to problem+json by the caller.
 pub trait Diagnoser: Send + Sync + 'static {
     fn diagnose(&self, input: &Input) -> crate::Result<Output>;
+    /// Close the loop on one record ([`crate::closed_loop::calibrate`]): the report JSON.
+    fn calibrate(&self, input: &Input) -> crate::Result<Value>;
     /// Identity of the loaded table (its model hash), for `/readyz`.
     fn table_id(&self) -> String;
 }

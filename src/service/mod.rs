@@ -22,6 +22,7 @@ use tokio::sync::{Notify, watch};
 use tower_http::trace::TraceLayer;
 
 pub mod auth;
+pub mod calibration;
 pub mod cli;
 pub mod core;
 pub mod dashboard;
@@ -95,6 +96,12 @@ pub fn router(state: AppState) -> Router {
             "/v1/machines/{machine_id}/diagnoses",
             get(read::list_diagnoses),
         )
+        .route(
+            "/v1/machines/{machine_id}/calibration",
+            post(calibration::post)
+                .get(calibration::get)
+                .delete(calibration::delete),
+        )
         .route("/v1/diagnoses/{diagnosis_id}", get(read::get_diagnosis))
         .route("/v1/webhooks", post(webhooks::create).get(webhooks::list))
         .route("/v1/webhooks/{webhook_id}", delete(webhooks::delete))
@@ -125,6 +132,9 @@ pub const ROUTES: &[(&str, &str)] = &[
     ("GET", "/v1/machines/{machine_id}"),
     ("POST", "/v1/machines/{machine_id}/records"),
     ("GET", "/v1/machines/{machine_id}/diagnoses"),
+    ("POST", "/v1/machines/{machine_id}/calibration"),
+    ("GET", "/v1/machines/{machine_id}/calibration"),
+    ("DELETE", "/v1/machines/{machine_id}/calibration"),
     ("GET", "/v1/diagnoses/{diagnosis_id}"),
     ("POST", "/v1/webhooks"),
     ("GET", "/v1/webhooks"),

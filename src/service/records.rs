@@ -72,7 +72,7 @@ pub struct JsonRecord {
 /// Query parameters (for the non-JSON bodies; `shaft_hz`, `recorded_at`, `sensor` also with
 /// JSON, where the body wins).
 #[derive(Debug, Default, Deserialize)]
-struct RecordQuery {
+pub struct RecordQuery {
     sample_rate_hz: Option<String>,
     shaft_hz: Option<String>,
     recorded_at: Option<String>,
@@ -284,52 +284,13 @@ fn decode_binary(
     Ok((r.samples, r.sample_rate))
 }
 
-fn f32_bytes(x: &[f64]) -> Vec<u8> {
-    let mut v = Vec::with_capacity(x.len() * 4);
-    for s in x {
-        v.extend_from_slice(&(*s as f32).to_le_bytes());
-    }
-    v
-}
-
-/// The handler.
-pub async fn post_record(
-    State(app): State<AppState>,
-    caller: Caller,
-    Path(machine_id): Path<String>,
-    RawQuery(query): RawQuery,
-    headers: HeaderMap,
-    body: Body,
-) -> Response {
-    match ingest(&app, &caller, &machine_id, query, &headers, body).await {
-        Ok(r) => r,
-        Err(e) => {
-            app.metrics.rejected(e.slug);
-            e.into_response()
-        }
-    }
-}
-
-async fn ingest(
-    app: &AppState,
-    caller: &Caller,
-    machine_id: &str,
-    query: Option<String>,
-    headers: &HeaderMap,
-    body: Body,
-) -> ApiResult<Response> {
-    let limits = &app.settings.limits;
-    if let Err(e) = caller.require(app, Scope::Ingest) {
-        // Read (and drop) the upload so the client sees the 401/403/429, not a reset.
-        let _ = read_body(headers, body, limits.max_body_bytes).await;
-        return Err(e);
-    }
-    check_machine_id(machine_id)?;
+/// The body format named by `Content-Type` (415 problem otherwise).
+pub fn body_format(headers: &HeaderMap) -> ApiResult<BodyFormat> {
     let ct = headers
         .get(header::CONTENT_TYPE)
         .and_then(|v| v.to_str().ok())
         .unwrap_or("");
-    let format = BodyFormat::from_content_type(ct).ok_or_else(|| {
+    BodyFormat::from_content_type(ct).ok_or_else(|| {
         ApiError::new(
             StatusCode::UNSUPPORTED_MEDIA_TYPE,
             "unsupported-media-type",
@@ -348,57 +309,40 @@ async fn ingest(
                 "audio/wav"
             ]),
         )
-    })?;
-    let q: RecordQuery =
-        serde_urlencoded::from_str(query.as_deref().unwrap_or("")).map_err(|e| {
-            ApiError::bad_request("invalid-query", "Invalid query parameter", e.to_string())
-        })?;
-    let bytes = read_body(headers, body, limits.max_body_bytes).await?;
+    })
+}
 
-    // Idempotency: replay the stored answer of an earlier identical request.
-    let idem_key = match headers.get("idempotency-key") {
-        None => None,
-        Some(v) => {
-            let s = v.to_str().ok().filter(|s| !s.is_empty() && s.len() <= 255);
-            Some(
-                s.ok_or_else(|| {
-                    ApiError::bad_request(
-                        "invalid-idempotency-key",
-                        "Invalid Idempotency-Key",
-                        "an Idempotency-Key is 1 to 255 visible ASCII characters (a UUID is a good choice)",
-                    )
-                })?
-                .to_string(),
-            )
-        }
-    };
-    let key_id = caller.key_id.clone().unwrap_or_default();
-    let request_hash = {
-        let mut h = Sha256::new();
-        for part in [
-            machine_id.as_bytes(),
-            format.mime().as_bytes(),
-            query.as_deref().unwrap_or("").as_bytes(),
-        ] {
-            h.update(part);
-            h.update([0u8]);
-        }
-        h.update(&bytes);
-        hex::encode(h.finalize())
-    };
-    if let Some(k) = &idem_key
-        && let Some(prev) = app.store.get_idempotent(&key_id, k).await?
-    {
-        return replay(app, &prev, &request_hash);
-    }
+/// The record query parameters (`sample_rate_hz`, `shaft_hz`, `recorded_at`, `sensor`).
+pub fn parse_query(query: Option<&str>) -> ApiResult<RecordQuery> {
+    serde_urlencoded::from_str(query.unwrap_or("")).map_err(|e| {
+        ApiError::bad_request("invalid-query", "Invalid query parameter", e.to_string())
+    })
+}
 
-    // Decode.
+/// A decoded, validated record and what the request said about it.
+#[derive(Debug, Clone)]
+pub struct Decoded {
+    pub samples: Vec<f64>,
+    pub sample_rate_hz: f64,
+    pub shaft_hz: Option<f64>,
+    pub recorded_at: Option<String>,
+    pub sensor: Option<String>,
+}
+
+/// Decode and validate a record body of `format` (JSON body fields win over the query),
+/// the same for every endpoint that takes a record.
+pub fn decode(
+    format: BodyFormat,
+    q: &RecordQuery,
+    bytes: &[u8],
+    limits: &crate::configuration::Limits,
+) -> ApiResult<Decoded> {
     let mut shaft = parse_number("shaft_hz", &q.shaft_hz)?;
     let mut recorded_at = q.recorded_at.clone();
     let mut sensor = q.sensor.clone();
     let (samples, fs) = match format {
         BodyFormat::Json => {
-            let r: JsonRecord = serde_json::from_slice(&bytes).map_err(|e| {
+            let r: JsonRecord = serde_json::from_slice(bytes).map_err(|e| {
                 let hint = if bytes.windows(3).any(|w| w == b"NaN") || bytes.windows(8).any(|w| w == b"Infinity") {
                     " (JSON has no NaN or Infinity: every sample must be a finite number)"
                 } else {
@@ -425,11 +369,7 @@ async fn ingest(
             }
             (r.samples, r.sample_rate_hz)
         }
-        f => decode_binary(
-            f,
-            &bytes,
-            parse_number("sample_rate_hz", &q.sample_rate_hz)?,
-        )?,
+        f => decode_binary(f, bytes, parse_number("sample_rate_hz", &q.sample_rate_hz)?)?,
     };
     if let Some(t) = &recorded_at
         && super::time::parse_rfc3339(t).is_none()
@@ -481,12 +421,117 @@ async fn ingest(
         .with("index", index as u64));
     }
 
-    // Diagnose off the async runtime.
+    Ok(Decoded {
+        samples,
+        sample_rate_hz: fs,
+        shaft_hz: shaft,
+        recorded_at,
+        sensor,
+    })
+}
+
+fn f32_bytes(x: &[f64]) -> Vec<u8> {
+    let mut v = Vec::with_capacity(x.len() * 4);
+    for s in x {
+        v.extend_from_slice(&(*s as f32).to_le_bytes());
+    }
+    v
+}
+
+/// The handler.
+pub async fn post_record(
+    State(app): State<AppState>,
+    caller: Caller,
+    Path(machine_id): Path<String>,
+    RawQuery(query): RawQuery,
+    headers: HeaderMap,
+    body: Body,
+) -> Response {
+    match ingest(&app, &caller, &machine_id, query, &headers, body).await {
+        Ok(r) => r,
+        Err(e) => {
+            app.metrics.rejected(e.slug);
+            e.into_response()
+        }
+    }
+}
+
+async fn ingest(
+    app: &AppState,
+    caller: &Caller,
+    machine_id: &str,
+    query: Option<String>,
+    headers: &HeaderMap,
+    body: Body,
+) -> ApiResult<Response> {
+    let limits = &app.settings.limits;
+    if let Err(e) = caller.require(app, Scope::Ingest) {
+        // Read (and drop) the upload so the client sees the 401/403/429, not a reset.
+        let _ = read_body(headers, body, limits.max_body_bytes).await;
+        return Err(e);
+    }
+    check_machine_id(machine_id)?;
+    let format = body_format(headers)?;
+    let q = parse_query(query.as_deref())?;
+    let bytes = read_body(headers, body, limits.max_body_bytes).await?;
+
+    // Idempotency: replay the stored answer of an earlier identical request.
+    let idem_key = match headers.get("idempotency-key") {
+        None => None,
+        Some(v) => {
+            let s = v.to_str().ok().filter(|s| !s.is_empty() && s.len() <= 255);
+            Some(
+                s.ok_or_else(|| {
+                    ApiError::bad_request(
+                        "invalid-idempotency-key",
+                        "Invalid Idempotency-Key",
+                        "an Idempotency-Key is 1 to 255 visible ASCII characters (a UUID is a good choice)",
+                    )
+                })?
+                .to_string(),
+            )
+        }
+    };
+    let key_id = caller.key_id.clone().unwrap_or_default();
+    let request_hash = {
+        let mut h = Sha256::new();
+        for part in [
+            machine_id.as_bytes(),
+            format.mime().as_bytes(),
+            query.as_deref().unwrap_or("").as_bytes(),
+        ] {
+            h.update(part);
+            h.update([0u8]);
+        }
+        h.update(&bytes);
+        hex::encode(h.finalize())
+    };
+    if let Some(k) = &idem_key
+        && let Some(prev) = app.store.get_idempotent(&key_id, k).await?
+    {
+        return replay(app, &prev, &request_hash);
+    }
+
+    let Decoded {
+        samples,
+        sample_rate_hz: fs,
+        shaft_hz: shaft,
+        recorded_at,
+        sensor,
+    } = decode(format, &q, &bytes, limits)?;
+
+    // Diagnose off the async runtime, with the machine's calibration if it has one.
+    let calibration = app
+        .store
+        .get_calibration(machine_id)
+        .await?
+        .map(|c| super::calibration::held(&c));
     let input = Input {
         samples,
         sample_rate_hz: fs,
         shaft_hz: shaft,
         sensor: sensor.clone(),
+        calibration,
     };
     let diag = app.diagnoser.clone();
     let (input, out) = tokio::task::spawn_blocking(move || {

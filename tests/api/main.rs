@@ -5,6 +5,7 @@ mod helpers;
 
 mod api;
 mod browser;
+mod calibration;
 mod cli;
 mod openapi;
 mod webhooks;

@@ -1,0 +1,144 @@
+//! A machine's calibrated effects held fixed in later diagnoses (the service's use of
+//! [`super::calibrate`]; see "Through the service" in `docs/closed-loop.md`).
+//!
+//! * A **path resonance** is a sensor/path stage: [`decolour`] divides the record's spectrum
+//!   by the fitted `|H(f)|` (zero phase, whole-record FFT, correction clamped to
+//!   ±[`MAX_CORRECTION_DB`]) so that the ordinary diagnosis reads de-coloured line features.
+//!   The mode is kept in **Hz** (`frequency_hz`), as a housing mode does not move with speed.
+//! * **Element effects** (shaft modulation, planetary wear) cannot enter the signature-table
+//!   likelihood without recomputing the table, so [`refit_held`] re-estimates the wear by the
+//!   closed loop's simulation refinement with the stored effects held at their calibrated
+//!   values (only `ea`, sensor gain and noise floor are fitted).
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+
+use super::effects::{PATH_RESONANCE, PLANETARY_WEAR, Resonance, SHAFT_MODULATION};
+use crate::error::{Error, Result};
+
+/// Largest |correction| (dB) [`decolour`] applies at any frequency: far above a resonance
+/// `1/|H|` grows as `(f/f_r)²` and would otherwise amplify the noise without bound.
+pub const MAX_CORRECTION_DB: f64 = 30.0;
+
+/// The effects a calibration added, as the later diagnoses hold them.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct HeldEffects {
+    /// Shaft-modulation sideband amplitude on mesh x1 (units of b); 0: none.
+    pub eccentricity_b: f64,
+    /// Planetary composite-error amplitude (units of b); `None`: the model's baseline.
+    pub planetary_error_b: Option<f64>,
+    /// Path resonance `(frequency Hz, damping ratio)`.
+    pub path_resonance: Option<(f64, f64)>,
+}
+
+impl HeldEffects {
+    /// From the `effects` of a [`super::CalibrationReport`] (`name` + `parameters`). Unknown
+    /// names and missing parameters are errors: a stored calibration must be fully understood.
+    pub fn from_effects<'a>(
+        effects: impl IntoIterator<Item = (&'a str, &'a BTreeMap<String, f64>)>,
+    ) -> Result<HeldEffects> {
+        let mut h = HeldEffects::default();
+        for (name, p) in effects {
+            let get = |k: &str| {
+                p.get(k).copied().filter(|v| v.is_finite()).ok_or_else(|| {
+                    Error::Signal(format!("stored effect `{name}` lacks parameter `{k}`"))
+                })
+            };
+            match name {
+                SHAFT_MODULATION => h.eccentricity_b = get("sideband_amplitude_b")?,
+                PLANETARY_WEAR => h.planetary_error_b = Some(get("planetary_error_b")?),
+                PATH_RESONANCE => {
+                    h.path_resonance = Some((get("frequency_hz")?, get("damping_ratio")?))
+                }
+                other => {
+                    return Err(Error::Signal(format!("unknown stored effect `{other}`")));
+                }
+            }
+        }
+        Ok(h)
+    }
+
+    /// No effect at all.
+    pub fn is_empty(&self) -> bool {
+        *self == HeldEffects::default()
+    }
+
+    /// The path stage at stage-1 mesh frequency `f1` (Hz).
+    pub fn resonance_at(&self, f1: f64) -> Option<Resonance> {
+        self.path_resonance
+            .map(|(fr, zeta)| Resonance { rho: fr / f1, zeta })
+    }
+}
+
+/// Divide the spectrum of `x` (sample rate `fs`) by `|H(f)|` of a resonance at `fr_hz` with
+/// damping `zeta` (zero phase; the correction at each frequency clamped to
+/// ±[`MAX_CORRECTION_DB`]).
+pub fn decolour(x: &[f64], fs: f64, fr_hz: f64, zeta: f64) -> Result<Vec<f64>> {
+    if !(fr_hz > 0.0 && zeta > 0.0 && fs > 0.0) {
+        return Err(Error::param(
+            "path resonance",
+            fr_hz,
+            "frequency, damping and sample rate must be positive",
+        ));
+    }
+    let n = x.len();
+    if n < 2 {
+        return Ok(x.to_vec());
+    }
+    let mut planner = realfft::RealFftPlanner::<f64>::new();
+    let fwd = planner.plan_fft_forward(n);
+    let inv = planner.plan_fft_inverse(n);
+    let mut input = x.to_vec();
+    let mut spec = fwd.make_output_vec();
+    fwd.process(&mut input, &mut spec)
+        .map_err(|e| Error::Signal(format!("FFT: {e}")))?;
+    let h = Resonance { rho: fr_hz, zeta };
+    for (k, c) in spec.iter_mut().enumerate() {
+        let f = k as f64 * fs / n as f64;
+        let corr = (-h.gain_db(f)).clamp(-MAX_CORRECTION_DB, MAX_CORRECTION_DB);
+        *c *= 10f64.powf(corr / 20.0);
+    }
+    spec[0].im = 0.0;
+    if n.is_multiple_of(2)
+        && let Some(last) = spec.last_mut()
+    {
+        last.im = 0.0;
+    }
+    let mut out = inv.make_output_vec();
+    inv.process(&mut spec, &mut out)
+        .map_err(|e| Error::Signal(format!("inverse FFT: {e}")))?;
+    let scale = 1.0 / n as f64;
+    Ok(out.into_iter().map(|v| v * scale).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::TAU;
+
+    #[test]
+    fn decolour_undoes_the_resonance_gain_of_a_tone() {
+        let fs = 8000.0;
+        let (fr, zeta) = (1000.0, 0.05);
+        let f = 1000.0; // on the resonance: |H| = 1/(2ζ) = 10 (20 dB)
+        let x: Vec<f64> = (0..8000)
+            .map(|i| 10.0 * (TAU * f * i as f64 / fs).sin())
+            .collect();
+        let y = decolour(&x, fs, fr, zeta).unwrap();
+        let rms = (y.iter().map(|v| v * v).sum::<f64>() / y.len() as f64).sqrt();
+        assert!((rms - 1.0 / 2f64.sqrt()).abs() < 1e-6, "rms {rms}");
+    }
+
+    #[test]
+    fn held_effects_parse_and_refuse_unknown() {
+        let mut p = BTreeMap::new();
+        p.insert("sideband_amplitude_b".to_string(), 0.08);
+        p.insert("shaft_ratio".to_string(), 1.0 / 29.0);
+        let h = HeldEffects::from_effects([(SHAFT_MODULATION, &p)]).unwrap();
+        assert_eq!(h.eccentricity_b, 0.08);
+        assert!(!h.is_empty());
+        assert!(HeldEffects::from_effects([("tone", &p)]).is_err());
+        assert!(HeldEffects::from_effects([(PLANETARY_WEAR, &p)]).is_err());
+    }
+}
