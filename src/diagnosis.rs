@@ -243,6 +243,10 @@ pub struct Matcher {
     /// mean and variance per entry per feature (entry-major).
     mean: Vec<Vec<f64>>,
     var: Vec<Vec<f64>>,
+    /// The same statistics of the wear features only, flat (`entry × wear_features.len()`,
+    /// in `wear_features` order): what the posterior's inner loop reads.
+    wear_mean: Vec<f64>,
+    wear_var: Vec<f64>,
     floor: f64,
     n_ea: usize,
     n_om: usize,
@@ -305,12 +309,22 @@ impl Matcher {
             mean.push(m);
             var.push(v);
         }
+        let wear_mean = mean
+            .iter()
+            .flat_map(|m| wear_features.iter().map(|&d| m[d]))
+            .collect();
+        let wear_var = var
+            .iter()
+            .flat_map(|v| wear_features.iter().map(|&d| v[d]))
+            .collect();
         Ok(Matcher {
             wear_features,
             f2_feature,
             f3_feature,
             mean,
             var,
+            wear_mean,
+            wear_var,
             floor,
             n_ea: table.grid.ea.len(),
             n_om: table.grid.omega1.len(),
@@ -337,25 +351,39 @@ impl Matcher {
         (i, (v - axis[i]) / (axis[i + 1] - axis[i]))
     }
 
-    /// Bilinear mean and variance of feature `d` at `(ea, Ω1)`.
-    pub fn stats_at(&self, d: usize, ea: f64, om: f64) -> (f64, f64) {
-        let (i, u) = Self::bracket(&self.ea, ea);
-        let (j, w) = if self.n_om > 1 {
+    /// Bracket of `ea` on the ea axis.
+    fn ea_bracket(&self, ea: f64) -> (usize, f64) {
+        Self::bracket(&self.ea, ea)
+    }
+
+    /// Bracket of `om` on the Ω1 axis (a one-column table: column 0).
+    fn om_bracket(&self, om: f64) -> (usize, f64) {
+        if self.n_om > 1 {
             Self::bracket(&self.om, om)
         } else {
             (0, 0.0)
-        };
+        }
+    }
+
+    /// The four bilinear corners `(entry, weight)` of the brackets `(i, u)` (ea) and `(j, w)`
+    /// (Ω1), in the fixed summation order every interpolation here uses.
+    fn corners(&self, (i, u): (usize, f64), (j, w): (usize, f64)) -> [(usize, f64); 4] {
         let j1 = (j + 1).min(self.n_om - 1);
         let i1 = (i + 1).min(self.n_ea - 1);
         let at = |a: usize, b: usize| a * self.n_om + b;
-        let mut m = 0.0;
-        let mut v = 0.0;
-        for (idx, wt) in [
+        [
             (at(i, j), (1.0 - u) * (1.0 - w)),
             (at(i1, j), u * (1.0 - w)),
             (at(i, j1), (1.0 - u) * w),
             (at(i1, j1), u * w),
-        ] {
+        ]
+    }
+
+    /// Bilinear mean and variance of feature `d` at `(ea, Ω1)`.
+    pub fn stats_at(&self, d: usize, ea: f64, om: f64) -> (f64, f64) {
+        let mut m = 0.0;
+        let mut v = 0.0;
+        for (idx, wt) in self.corners(self.ea_bracket(ea), self.om_bracket(om)) {
             m += wt * self.mean[idx][d];
             v += wt * self.var[idx][d];
         }
@@ -364,14 +392,31 @@ impl Matcher {
 
     /// Tempered log-likelihood of the clipped features `y` at `(ea, Ω1)`.
     pub fn log_likelihood(&self, y: &[f64], ea: f64, om: f64, opts: &DiagnoseOptions) -> f64 {
+        let yw: Vec<f64> = self.wear_features.iter().map(|&d| y[d]).collect();
         let s0 = opts.feature_sigma * opts.feature_sigma;
+        let corners = self.corners(self.ea_bracket(ea), self.om_bracket(om));
+        self.wear_log_likelihood(&yw, &corners, s0) / opts.temperature.max(1e-9)
+    }
+
+    /// Untempered log-likelihood of the wear features `yw` (in `wear_features` order) at the
+    /// bilinear `corners`, from the flat per-entry arrays. Same arithmetic, in the same order,
+    /// as [`Matcher::stats_at`] per feature (the results are bit-identical).
+    #[inline]
+    fn wear_log_likelihood(&self, yw: &[f64], corners: &[(usize, f64); 4], s0: f64) -> f64 {
+        let nw = yw.len();
+        let rows = corners.map(|(idx, _)| idx * nw);
         let mut ll = 0.0;
-        for &d in &self.wear_features {
-            let (m, v) = self.stats_at(d, ea, om);
+        for (q, &yq) in yw.iter().enumerate() {
+            let mut m = 0.0;
+            let mut v = 0.0;
+            for (r, &(_, wt)) in rows.iter().zip(corners) {
+                m += wt * self.wear_mean[r + q];
+                v += wt * self.wear_var[r + q];
+            }
             let var = v + s0;
-            ll += -0.5 * (y[d] - m).powi(2) / var - 0.5 * var.ln();
+            ll += -0.5 * (yq - m).powi(2) / var - 0.5 * var.ln();
         }
-        ll / opts.temperature.max(1e-9)
+        ll
     }
 
     /// χ² of the clipped features `y` at `(ea, Ω1)` and the number of features in it.
@@ -476,12 +521,23 @@ pub fn posterior(m: &Matcher, y: &[f64], omega1: f64, opts: &DiagnoseOptions) ->
             })
             .collect()
     };
-    let mut ll = vec![vec![0.0; oms.len()]; n];
+    // Brackets of every Ω1 node and every ea node, found once (not per feature and point).
+    let yw: Vec<f64> = m.wear_features.iter().map(|&d| y[d]).collect();
+    let s0 = opts.feature_sigma * opts.feature_sigma;
+    let temp = opts.temperature.max(1e-9);
+    let om_nodes: Vec<((usize, f64), f64)> = oms
+        .iter()
+        .map(|&(o, w)| (m.om_bracket(o), w.ln()))
+        .collect();
+    let no = oms.len();
+    let mut ll = vec![0.0; n * no];
     let mut max = f64::NEG_INFINITY;
     for (k, &e) in ea.iter().enumerate() {
-        for (j, &(o, w)) in oms.iter().enumerate() {
-            let v = m.log_likelihood(y, e, o, opts) + w.ln();
-            ll[k][j] = v;
+        let eb = m.ea_bracket(e);
+        for (j, &(ob, lnw)) in om_nodes.iter().enumerate() {
+            let corners = m.corners(eb, ob);
+            let v = m.wear_log_likelihood(&yw, &corners, s0) / temp + lnw;
+            ll[k * no + j] = v;
             max = max.max(v);
         }
     }
@@ -489,7 +545,7 @@ pub fn posterior(m: &Matcher, y: &[f64], omega1: f64, opts: &DiagnoseOptions) ->
     let mut om_acc = 0.0;
     for k in 0..n {
         for (j, &(o, _)) in oms.iter().enumerate() {
-            let v = (ll[k][j] - max).exp();
+            let v = (ll[k * no + j] - max).exp();
             p[k] += v;
             om_acc += v * o;
         }
@@ -504,77 +560,88 @@ pub fn posterior(m: &Matcher, y: &[f64], omega1: f64, opts: &DiagnoseOptions) ->
 }
 
 /// Local spectral floor: running median of `amp` over ±`half` bins, evaluated every `stride`
-/// bins and interpolated.
-fn local_floor(amp: &[f64], half: usize, stride: usize) -> Vec<f64> {
-    let n = amp.len();
-    let mut centres = Vec::new();
-    let mut values = Vec::new();
-    let mut buf = Vec::with_capacity(2 * half + 1);
-    let mut c = 0;
-    while c < n {
-        let lo = c.saturating_sub(half);
-        let hi = (c + half + 1).min(n);
-        buf.clear();
-        buf.extend_from_slice(&amp[lo..hi]);
-        let mid = buf.len() / 2;
-        buf.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
-        centres.push(c);
-        values.push(buf[mid].max(1e-300));
-        c += stride;
+/// bins and interpolated. The medians are computed on first use: the f1 search reads the floor
+/// only around the speed band and the partner lines, a fraction of the spectrum.
+struct LocalFloor {
+    half: usize,
+    stride: usize,
+    /// Median at centre `i · stride`, once computed.
+    medians: Vec<std::cell::OnceCell<f64>>,
+}
+
+impl LocalFloor {
+    fn new(n: usize, half: usize, stride: usize) -> Self {
+        LocalFloor {
+            half,
+            stride,
+            medians: (0..n.div_ceil(stride))
+                .map(|_| std::cell::OnceCell::new())
+                .collect(),
+        }
     }
-    let mut out = vec![0.0; n];
-    for (k, o) in out.iter_mut().enumerate() {
-        let i = (k / stride).min(centres.len() - 1);
-        let i1 = (i + 1).min(centres.len() - 1);
+
+    fn median(&self, amp: &[f64], i: usize) -> f64 {
+        *self.medians[i].get_or_init(|| {
+            let c = i * self.stride;
+            let lo = c.saturating_sub(self.half);
+            let hi = (c + self.half + 1).min(amp.len());
+            let mut buf = amp[lo..hi].to_vec();
+            let mid = buf.len() / 2;
+            buf.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+            buf[mid].max(1e-300)
+        })
+    }
+
+    /// The floor at bin `k` of `amp` (the spectrum this floor was made for).
+    fn at(&self, amp: &[f64], k: usize) -> f64 {
+        let last = self.medians.len() - 1;
+        let i = (k / self.stride).min(last);
+        let i1 = (i + 1).min(last);
         let t = if i1 > i {
-            (k - centres[i]) as f64 / (centres[i1] - centres[i]) as f64
+            (k - i * self.stride) as f64 / ((i1 - i) * self.stride) as f64
         } else {
             0.0
         };
-        *o = values[i] * (1.0 - t) + values[i1] * t;
+        self.median(amp, i) * (1.0 - t) + self.median(amp, i1) * t
     }
-    out
+}
+
+/// [`LocalFloor`] at every bin (reference for the tests).
+#[cfg(test)]
+fn local_floor(amp: &[f64], half: usize, stride: usize) -> Vec<f64> {
+    let f = LocalFloor::new(amp.len(), half, stride);
+    (0..amp.len()).map(|k| f.at(amp, k)).collect()
 }
 
 /// Hann-windowed DTFT magnitude of the whole record at `f` (Hz): a smooth peak to refine on.
-fn dtft_mag(x: &[f64], fs: f64, f: f64, w: &[f64]) -> f64 {
-    let cyc = f / fs;
-    let rot = (std::f64::consts::TAU * cyc).sin_cos();
-    let (mut re, mut im) = (0.0, 0.0);
-    let mut z = (1.0, 0.0); // (cos, sin)
-    for (i, (xv, wv)) in x.iter().zip(w).enumerate() {
-        if i % 1024 == 0 {
-            let ph = (cyc * i as f64).fract() * std::f64::consts::TAU;
-            z = (ph.cos(), ph.sin());
-        }
-        let v = xv * wv;
-        re += v * z.0;
-        im -= v * z.1;
-        z = (z.0 * rot.1 - z.1 * rot.0, z.0 * rot.0 + z.1 * rot.1);
-    }
+/// `xw` is the record times the window.
+fn dtft_mag(xw: &[f64], fs: f64, f: f64) -> f64 {
+    let (re, im) = crate::signal::dtft_sums(xw, f / fs);
     re.hypot(im)
 }
 
 /// Golden-section maximisation of the DTFT magnitude on `[a, b]`.
 fn refine_peak(x: &[f64], fs: f64, a: f64, b: f64, w: &[f64]) -> f64 {
+    // The windowed record does not depend on the frequency: form it once.
+    let xw: Vec<f64> = x.iter().zip(w).map(|(x, w)| x * w).collect();
     let g = 0.5 * (5f64.sqrt() - 1.0);
     let (mut a, mut b) = (a, b);
     let mut c = b - g * (b - a);
     let mut d = a + g * (b - a);
-    let (mut fc, mut fd) = (dtft_mag(x, fs, c, w), dtft_mag(x, fs, d, w));
+    let (mut fc, mut fd) = (dtft_mag(&xw, fs, c), dtft_mag(&xw, fs, d));
     for _ in 0..40 {
         if fc > fd {
             b = d;
             d = c;
             fd = fc;
             c = b - g * (b - a);
-            fc = dtft_mag(x, fs, c, w);
+            fc = dtft_mag(&xw, fs, c);
         } else {
             a = c;
             c = d;
             fc = fd;
             d = a + g * (b - a);
-            fd = dtft_mag(x, fs, d, w);
+            fd = dtft_mag(&xw, fs, d);
         }
         if (b - a) < 1e-7 * b.abs().max(1.0) {
             break;
@@ -585,7 +652,7 @@ fn refine_peak(x: &[f64], fs: f64, a: f64, b: f64, w: &[f64]) -> f64 {
 
 /// Refine a peak near `f0` (Hz) to the maximum of the whole-record Hann DTFT within ±`half`.
 fn refine_near(x: &[f64], fs: f64, f0: f64, half: f64) -> f64 {
-    let w = crate::signal::window(Window::Hann, x.len());
+    let w = crate::signal::shared_window(Window::Hann, x.len());
     refine_peak(x, fs, (f0 - half).max(1e-9), f0 + half, &w)
 }
 
@@ -605,7 +672,7 @@ fn partners(fr: &Frequencies) -> Vec<(&'static str, f64)> {
 struct SearchSpectrum {
     freq_step: f64,
     amp: Vec<f64>,
-    floor: Vec<f64>,
+    floor: LocalFloor,
 }
 
 impl SearchSpectrum {
@@ -616,7 +683,7 @@ impl SearchSpectrum {
         } else {
             welch(x, fs, MAX, 0.5, Window::Hann)?
         };
-        let floor = local_floor(&s.amplitude, 100, 10);
+        let floor = LocalFloor::new(s.amplitude.len(), 100, 10);
         Ok(SearchSpectrum {
             freq_step: s.resolution(),
             amp: s.amplitude,
@@ -631,7 +698,7 @@ impl SearchSpectrum {
             return 0.0;
         }
         (lo..=hi)
-            .map(|k| 20.0 * (self.amp[k] / self.floor[k]).log10())
+            .map(|k| 20.0 * (self.amp[k] / self.floor.at(&self.amp, k)).log10())
             .fold(f64::NEG_INFINITY, f64::max)
     }
 }
@@ -647,7 +714,7 @@ fn locate_f1(
     let spec = SearchSpectrum::new(x, fs)?;
     let df = spec.freq_step;
     let tol = |f: f64| (2.0 * df).max(0.002 * f);
-    let w = crate::signal::window(Window::Hann, x.len());
+    let w = crate::signal::shared_window(Window::Hann, x.len());
     let parts = partners(fr);
     let evidence = |f: f64| -> (f64, Vec<String>) {
         let mut score = spec.prominence(f, tol(f)).clamp(0.0, 60.0);
@@ -694,7 +761,7 @@ fn locate_f1(
             && a >= spec.amp[k - 2]
             && a > spec.amp[k + 2]
         {
-            let p = 20.0 * (a / spec.floor[k]).log10();
+            let p = 20.0 * (a / spec.floor.at(&spec.amp, k)).log10();
             if p >= 10.0 {
                 cands.push((k, p));
             }
@@ -1092,4 +1159,40 @@ fn nearest(axis: &[f64], v: f64) -> usize {
         .min_by(|a, b| (a.1 - v).abs().total_cmp(&(b.1 - v).abs()))
         .map(|(i, _)| i)
         .unwrap_or(0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The running median equals a fresh median of every window.
+    #[test]
+    fn local_floor_matches_per_window_median() {
+        let mut s = 12345u64;
+        let amp: Vec<f64> = (0..3001)
+            .map(|i| {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                // Repeated values too (ties).
+                if i % 7 == 0 {
+                    0.5
+                } else {
+                    (s >> 11) as f64 / (1u64 << 53) as f64
+                }
+            })
+            .collect();
+        for (half, stride) in [(100, 10), (3, 10), (50, 1)] {
+            let got = local_floor(&amp, half, stride);
+            let n = amp.len();
+            let mut c = 0;
+            while c < n {
+                let mut w = amp[c.saturating_sub(half)..(c + half + 1).min(n)].to_vec();
+                let mid = w.len() / 2;
+                w.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+                assert_eq!(got[c], w[mid], "half {half} stride {stride} centre {c}");
+                c += stride;
+            }
+        }
+    }
 }

@@ -23,10 +23,10 @@
 //! comparable with TSA-based alarm thresholds; they are reported beside the model-based answer,
 //! not used by it.
 
-use realfft::RealFftPlanner;
 use serde::Serialize;
 
-use super::check_samples;
+use super::phasor::{fit_sums, subtract_sinusoid};
+use super::{PlanCache, check_samples};
 use crate::{Error, Result};
 
 /// Largest number of mesh harmonics removed / summed.
@@ -57,23 +57,7 @@ pub struct ConditionIndicators {
 /// Fit and subtract `a cos + b sin` at `freq` (cycles/sample) from `x`; return the amplitude.
 fn remove_sinusoid(x: &mut [f64], cyc: f64) -> f64 {
     let n = x.len();
-    let w = std::f64::consts::TAU * cyc;
-    let (mut c, mut s) = (0.0, 0.0);
-    let (mut cc, mut ss, mut cs) = (0.0, 0.0, 0.0);
-    let rot = (w.cos(), w.sin());
-    let mut z = (1.0, 0.0);
-    for (i, v) in x.iter().enumerate() {
-        if i % 1024 == 0 {
-            let ph = (cyc * i as f64).fract() * std::f64::consts::TAU;
-            z = (ph.cos(), ph.sin());
-        }
-        c += v * z.0;
-        s += v * z.1;
-        cc += z.0 * z.0;
-        ss += z.1 * z.1;
-        cs += z.0 * z.1;
-        z = (z.0 * rot.0 - z.1 * rot.1, z.0 * rot.1 + z.1 * rot.0);
-    }
+    let [c, s, cc, ss, cs] = fit_sums(x, cyc);
     // 2×2 normal equations.
     let det = cc * ss - cs * cs;
     if det.abs() <= 1e-12 * (cc * ss).max(1e-300) || det.is_nan() || n < 4 {
@@ -81,26 +65,23 @@ fn remove_sinusoid(x: &mut [f64], cyc: f64) -> f64 {
     }
     let a = (c * ss - s * cs) / det;
     let b = (s * cc - c * cs) / det;
-    let mut z = (1.0, 0.0);
-    for (i, v) in x.iter_mut().enumerate() {
-        if i % 1024 == 0 {
-            let ph = (cyc * i as f64).fract() * std::f64::consts::TAU;
-            z = (ph.cos(), ph.sin());
-        }
-        *v -= a * z.0 + b * z.1;
-        z = (z.0 * rot.0 - z.1 * rot.1, z.0 * rot.1 + z.1 * rot.0);
-    }
+    subtract_sinusoid(x, cyc, a, b);
     a.hypot(b)
 }
 
 /// Zero `±REMOVE_BINS` bins around each frequency (cycles/sample) through a real FFT.
 fn notch(x: &mut [f64], cycs: &[f64]) -> Result<()> {
     let n = x.len();
-    let mut planner = RealFftPlanner::<f64>::new();
-    let fwd = planner.plan_fft_forward(n);
-    let inv = planner.plan_fft_inverse(n);
+    // Plans from the process-wide cache: planning a record-length FFT pair costs more than the
+    // transforms themselves, and this runs twice per diagnosis.
+    let fwd = PlanCache::global().forward(n);
+    let inv = PlanCache::global().inverse(n);
     let mut spec = fwd.make_output_vec();
-    fwd.process(x, &mut spec)
+    let mut scratch = fwd.make_scratch_vec();
+    if inv.get_scratch_len() > scratch.len() {
+        scratch.resize(inv.get_scratch_len(), Default::default());
+    }
+    fwd.process_with_scratch(x, &mut spec, &mut scratch)
         .map_err(|e| Error::Signal(format!("FFT failed: {e}")))?;
     for &c in cycs {
         let k = (c * n as f64).round() as isize;
@@ -118,7 +99,7 @@ fn notch(x: &mut [f64], cycs: &[f64]) -> Result<()> {
     {
         last.im = 0.0;
     }
-    inv.process(&mut spec, x)
+    inv.process_with_scratch(&mut spec, x, &mut scratch)
         .map_err(|e| Error::Signal(format!("inverse FFT failed: {e}")))?;
     for v in x.iter_mut() {
         *v /= n as f64;

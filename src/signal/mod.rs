@@ -26,15 +26,17 @@
 //!   unusable input; their `try_*` twins return the explanatory error instead.
 
 pub mod features;
+mod phasor;
 mod plan;
 mod spectrum;
 mod stats;
 mod window;
 
+pub(crate) use phasor::dtft_sums;
 pub use plan::PlanCache;
 pub use spectrum::{Spectrum, amplitude_spectrum, line_amplitude, welch};
 pub use stats::{crest_factor, kurtosis, rms, try_crest_factor, try_kurtosis, try_rms};
-pub use window::{Window, window};
+pub use window::{Window, shared_window, window};
 
 use crate::{Error, Result};
 

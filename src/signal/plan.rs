@@ -3,9 +3,10 @@
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 
-use realfft::{RealFftPlanner, RealToComplex};
+use realfft::{ComplexToReal, RealFftPlanner, RealToComplex};
 
-/// A cache of `realfft` forward plans keyed by transform length, shareable between threads.
+/// A cache of `realfft` plans (forward, and inverse for the few users that need one) keyed by
+/// transform length, shareable between threads.
 ///
 /// Planning an FFT (choosing the algorithm, computing twiddle factors) costs far more than one
 /// transform of a short record, so [`amplitude_spectrum`](super::amplitude_spectrum) and
@@ -20,6 +21,7 @@ pub struct PlanCache {
 struct Inner {
     planner: RealFftPlanner<f64>,
     plans: HashMap<usize, Arc<dyn RealToComplex<f64>>>,
+    inverse: HashMap<usize, Arc<dyn ComplexToReal<f64>>>,
 }
 
 impl Default for PlanCache {
@@ -43,6 +45,7 @@ impl PlanCache {
             inner: Mutex::new(Inner {
                 planner: RealFftPlanner::new(),
                 plans: HashMap::new(),
+                inverse: HashMap::new(),
             }),
         }
     }
@@ -69,6 +72,24 @@ impl PlanCache {
         let p = g.planner.plan_fft_forward(len);
         g.plans.insert(len, Arc::clone(&p));
         p
+    }
+
+    /// The inverse (complex-to-real) plan for `len` output samples (input `len/2 + 1` bins,
+    /// unnormalised). Planned on first request, then shared; not counted by [`PlanCache::len`]
+    /// and [`PlanCache::lengths`], which describe the forward plans.
+    pub fn inverse(&self, len: usize) -> Arc<dyn ComplexToReal<f64>> {
+        let mut g = self.lock();
+        if let Some(p) = g.inverse.get(&len) {
+            return Arc::clone(p);
+        }
+        let p = g.planner.plan_fft_inverse(len);
+        g.inverse.insert(len, Arc::clone(&p));
+        p
+    }
+
+    /// Whether an inverse plan for `len` samples is already cached.
+    pub fn contains_inverse(&self, len: usize) -> bool {
+        self.lock().inverse.contains_key(&len)
     }
 
     /// Whether a plan for `len` samples is already cached.
@@ -109,6 +130,11 @@ mod tests {
         let _ = c.forward(17);
         assert_eq!(c.lengths(), vec![17, 96]);
         assert!(c.contains(17) && !c.contains(18));
+        let i = c.inverse(96);
+        assert!(Arc::ptr_eq(&i, &c.inverse(96)));
+        assert_eq!(i.len(), 96);
+        assert!(c.contains_inverse(96) && !c.contains_inverse(17));
+        assert_eq!(c.len(), 2);
     }
 
     #[test]

@@ -8,7 +8,7 @@ use realfft::RealToComplex;
 use realfft::num_complex::Complex;
 use serde::Serialize;
 
-use super::window::{Window, window};
+use super::window::{Window, shared_window};
 use super::{PlanCache, check_min_len, check_rate, check_samples};
 use crate::{Error, Result};
 
@@ -175,7 +175,7 @@ pub fn amplitude_spectrum(x: &[f64], sample_rate: f64, window_kind: Window) -> R
     check_samples(x)?;
     check_min_len(x, 2, "an amplitude spectrum")?;
     let n = x.len();
-    let w = window(window_kind, n);
+    let w = shared_window(window_kind, n);
     let inv_wsum = 1.0 / w.iter().sum::<f64>();
     let mut amplitude = vec![0.0; n / 2 + 1];
     Fft::new(n).amplitudes(x, &w, inv_wsum, &mut amplitude, |o, a| *o = a)?;
@@ -235,7 +235,7 @@ pub fn welch(
     }
     let hop = ((l as f64 * (1.0 - overlap)).round() as usize).clamp(1, l);
     let nseg = 1 + (x.len() - l) / hop;
-    let w = window(window_kind, l);
+    let w = shared_window(window_kind, l);
     let inv_wsum = 1.0 / w.iter().sum::<f64>();
     let mut acc = vec![0.0; l / 2 + 1];
     let mut fft = Fft::new(l);
@@ -282,11 +282,11 @@ pub fn line_amplitude(x: &[f64], sample_rate: f64, freq: f64) -> Result<f64> {
     check_min_len(x, 8, "line_amplitude")?;
     let n = x.len();
     let mean = x.iter().sum::<f64>() / n as f64;
-    let w = window(Window::Hann, n);
+    let w = shared_window(Window::Hann, n);
     let wsum: f64 = w.iter().sum();
     let cycles_per_sample = freq / sample_rate;
     let (mut re, mut im) = (0.0, 0.0);
-    for (i, (xv, wv)) in x.iter().zip(&w).enumerate() {
+    for (i, (xv, wv)) in x.iter().zip(w.iter()).enumerate() {
         // Reduce the phase to one cycle before scaling by 2π, to keep it accurate for long records.
         let ph = (cycles_per_sample * i as f64).fract() * std::f64::consts::TAU;
         let (s, c) = ph.sin_cos();
@@ -299,6 +299,7 @@ pub fn line_amplitude(x: &[f64], sample_rate: f64, freq: f64) -> Result<f64> {
 
 #[cfg(test)]
 mod tests {
+    use super::super::window::window;
     use super::*;
     use std::f64::consts::PI;
 

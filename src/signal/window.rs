@@ -1,5 +1,8 @@
 //! Window functions (periodic, "DFT-even" form).
 
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, OnceLock};
+
 use serde::{Deserialize, Serialize};
 
 /// Window shapes for spectral analysis.
@@ -63,6 +66,34 @@ pub fn window(kind: Window, n: usize) -> Vec<f64> {
     }
 }
 
+/// Most windows [`shared_window`] keeps (the cache is emptied when it would grow past this, so
+/// a stream of records of ever-new lengths cannot grow it without bound).
+const SHARED_WINDOWS: usize = 32;
+
+/// [`window`] from a small process-wide cache: the same values, computed once per
+/// `(kind, n)`. A record-length Hann window costs one `cos` per sample, which is a noticeable
+/// share of a diagnosis when it is recomputed for every record.
+pub fn shared_window(kind: Window, n: usize) -> Arc<[f64]> {
+    type Cache = Mutex<HashMap<(Window, usize), Arc<[f64]>>>;
+    static CACHE: OnceLock<Cache> = OnceLock::new();
+    let cache = CACHE.get_or_init(Default::default);
+    if let Some(w) = cache
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .get(&(kind, n))
+    {
+        return Arc::clone(w);
+    }
+    // Computed outside the lock; two threads may both compute it, with identical values.
+    let w: Arc<[f64]> = window(kind, n).into();
+    let mut g = cache.lock().unwrap_or_else(|e| e.into_inner());
+    if g.len() >= SHARED_WINDOWS {
+        g.clear();
+    }
+    g.insert((kind, n), Arc::clone(&w));
+    w
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -73,6 +104,17 @@ mod tests {
             assert!(window(kind, 0).is_empty());
             assert_eq!(window(kind, 1), vec![1.0]);
             assert_eq!(window(kind, 17).len(), 17);
+        }
+    }
+
+    #[test]
+    fn shared_window_equals_window() {
+        for kind in [Window::Rectangular, Window::Hann, Window::FlatTop] {
+            for n in [1usize, 2, 17, 1000] {
+                let a = shared_window(kind, n);
+                assert_eq!(&a[..], &window(kind, n)[..]);
+                assert!(Arc::ptr_eq(&a, &shared_window(kind, n)));
+            }
         }
     }
 

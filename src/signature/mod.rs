@@ -35,7 +35,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 use crate::model::Frequencies;
-use crate::signal::{PlanCache, Window, window};
+use crate::signal::{PlanCache, Window, shared_window};
 
 pub use table::{SignatureTable, model_hash};
 
@@ -210,25 +210,33 @@ pub fn measure_lines(x: &[f64], fs: f64, f1: f64, lines: &[LineDef]) -> Result<L
     }
     let hop = (l / 2).max(1);
     let nseg = 1 + (x.len() - l) / hop;
-    let w = window(Window::Hann, l);
+    let w = shared_window(Window::Hann, l);
     let wsum: f64 = w.iter().sum();
     let w2sum: f64 = w.iter().map(|v| v * v).sum();
-    // Window × complex exponential, per line, and its sum (for the mean removal).
-    let kernels: Vec<(Vec<f64>, Vec<f64>, f64, f64)> = lines
-        .iter()
-        .map(|ln| {
-            let c = ln.ratio * f1 / fs;
-            let (mut re, mut im) = (Vec::with_capacity(l), Vec::with_capacity(l));
-            for (n, wv) in w.iter().enumerate() {
-                let ph = (c * n as f64).fract() * TAU;
-                let (s, co) = ph.sin_cos();
-                re.push(wv * co);
-                im.push(-wv * s);
-            }
-            let (sr, si) = (re.iter().sum(), im.iter().sum());
-            (re, im, sr, si)
-        })
-        .collect();
+    // Window × complex exponential, per line, and its sum (for the mean removal). Stored
+    // sample-major (`[n][line]`) so that one pass over a segment updates every line's sums:
+    // the lines' accumulations are independent chains the CPU overlaps (and vectorises), each
+    // still summed in sample order, so the values are those of one line at a time.
+    let nl = lines.len();
+    let mut kre = vec![0.0; l * nl];
+    let mut kim = vec![0.0; l * nl];
+    let mut ksum: Vec<(f64, f64)> = Vec::with_capacity(nl);
+    for (q, ln) in lines.iter().enumerate() {
+        let c = ln.ratio * f1 / fs;
+        let (mut sr, mut si) = (0.0, 0.0);
+        for (n, wv) in w.iter().enumerate() {
+            let ph = (c * n as f64).fract() * TAU;
+            let (s, co) = ph.sin_cos();
+            let (re, im) = (wv * co, -wv * s);
+            kre[n * nl + q] = re;
+            kim[n * nl + q] = im;
+            sr += re;
+            si += im;
+        }
+        ksum.push((sr, si));
+    }
+    let mut sum_re = vec![0.0; nl];
+    let mut sum_im = vec![0.0; nl];
     let mut power = vec![0.0; lines.len()];
     let plan = PlanCache::global().forward(l);
     let mut input = plan.make_input_vec();
@@ -242,18 +250,15 @@ pub fn measure_lines(x: &[f64], fs: f64, f1: f64, lines: &[LineDef]) -> Result<L
     for s in 0..nseg {
         let seg = &x[s * hop..s * hop + l];
         let mean = seg.iter().sum::<f64>() / l as f64;
-        for (p, (re, im, sr, si)) in power.iter_mut().zip(&kernels) {
-            let (mut a, mut b) = (0.0, 0.0);
-            for ((xv, kr), ki) in seg.iter().zip(re).zip(im) {
-                a += xv * kr;
-                b += xv * ki;
-            }
+        line_sums(seg, &kre, &kim, &mut sum_re, &mut sum_im);
+        for (((p, &(sr, si)), &a), &b) in power.iter_mut().zip(&ksum).zip(&sum_re).zip(&sum_im) {
+            let (mut a, mut b) = (a, b);
             a -= mean * sr;
             b -= mean * si;
             let amp = 2.0 * a.hypot(b) / wsum;
             *p += amp * amp;
         }
-        for ((o, xv), wv) in input.iter_mut().zip(seg).zip(&w) {
+        for ((o, xv), wv) in input.iter_mut().zip(seg).zip(w.iter()) {
             *o = (xv - mean) * wv;
         }
         plan.process_with_scratch(&mut input, &mut spectrum, &mut scratch)
@@ -271,6 +276,50 @@ pub fn measure_lines(x: &[f64], fs: f64, f1: f64, lines: &[LineDef]) -> Result<L
         segments: nseg,
         segment_len: l,
     })
+}
+
+/// `sum_re[q] = Σ_n seg[n] kre[n][q]` and likewise `sum_im`, kernels sample-major with
+/// `sum_re.len()` lines; each line summed in sample order.
+#[inline(always)]
+fn line_sums_impl(seg: &[f64], kre: &[f64], kim: &[f64], sum_re: &mut [f64], sum_im: &mut [f64]) {
+    let nl = sum_re.len();
+    sum_re.fill(0.0);
+    sum_im.fill(0.0);
+    for ((xv, kr), ki) in seg
+        .iter()
+        .zip(kre.chunks_exact(nl))
+        .zip(kim.chunks_exact(nl))
+    {
+        for (a, k) in sum_re.iter_mut().zip(kr) {
+            *a += xv * k;
+        }
+        for (b, k) in sum_im.iter_mut().zip(ki) {
+            *b += xv * k;
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn line_sums_avx2(
+    seg: &[f64],
+    kre: &[f64],
+    kim: &[f64],
+    sum_re: &mut [f64],
+    sum_im: &mut [f64],
+) {
+    line_sums_impl(seg, kre, kim, sum_re, sum_im)
+}
+
+/// [`line_sums_impl`] with 256-bit vectors when the CPU has AVX2 (same operations per line,
+/// no FMA contraction: identical results).
+fn line_sums(seg: &[f64], kre: &[f64], kim: &[f64], sum_re: &mut [f64], sum_im: &mut [f64]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { line_sums_avx2(seg, kre, kim, sum_re, sum_im) };
+    }
+    line_sums_impl(seg, kre, kim, sum_re, sum_im)
 }
 
 /// SplitMix64: a tiny, well-mixed deterministic generator for seeds and initial states (no

@@ -1,0 +1,253 @@
+//! Sums of a record against a complex exponential `e^{i 2π c n}` (one DTFT bin at an arbitrary
+//! frequency, sinusoid fitting), computed with [`LANES`] interleaved phasor recurrences.
+//!
+//! One recurrence `z ← z · e^{i 2π c}` is a chain of dependent multiplications: the CPU waits
+//! for each step before starting the next (≈ 8 cycles a sample). Running `LANES` recurrences,
+//! lane `r` covering samples `n ≡ r (mod LANES)` and stepping by `e^{i 2π c LANES}`, makes the
+//! steps independent (and vectorisable); the phases are re-anchored exactly (`sin_cos` of the
+//! phase reduced to one cycle, times the exact lane offsets) every [`RESYNC`] samples, so the
+//! rounding drift stays at the 1e-14 level whatever the record length. On x86-64 CPUs with AVX2
+//! the same code runs with 256-bit vectors (runtime detection; identical results). Results agree with a single recurrence to
+//! rounding, not bit for bit (the sums are accumulated per lane, then added).
+
+use std::f64::consts::TAU;
+
+/// Number of interleaved recurrences.
+pub(crate) const LANES: usize = 16;
+/// Samples between exact re-anchorings of the phases (a multiple of [`LANES`]).
+pub(crate) const RESYNC: usize = 1024;
+
+/// Per-frequency constants: the lane step `e^{i 2π c LANES}` and the lane offsets
+/// `e^{i 2π c r}`, `r < LANES`.
+struct Steps {
+    cyc: f64,
+    rc: f64,
+    rs: f64,
+    oc: [f64; LANES],
+    os: [f64; LANES],
+}
+
+impl Steps {
+    #[inline(always)]
+    fn new(cyc: f64) -> Self {
+        let (rs, rc) = (TAU * cyc * LANES as f64).sin_cos();
+        let mut oc = [0.0; LANES];
+        let mut os = [0.0; LANES];
+        for r in 0..LANES {
+            let (s, c) = ((cyc * r as f64).fract() * TAU).sin_cos();
+            oc[r] = c;
+            os[r] = s;
+        }
+        Steps {
+            cyc,
+            rc,
+            rs,
+            oc,
+            os,
+        }
+    }
+
+    /// The phasors `e^{i 2π c (n0 + r)}`, `r < LANES`, as (cos, sin) lanes: one exact
+    /// `sin_cos` of the block phase (reduced to one cycle) times the lane offsets.
+    #[inline(always)]
+    fn anchor(&self, n0: usize) -> ([f64; LANES], [f64; LANES]) {
+        let (s, c) = ((self.cyc * n0 as f64).fract() * TAU).sin_cos();
+        let mut zc = [0.0; LANES];
+        let mut zs = [0.0; LANES];
+        for r in 0..LANES {
+            zc[r] = c * self.oc[r] - s * self.os[r];
+            zs[r] = c * self.os[r] + s * self.oc[r];
+        }
+        (zc, zs)
+    }
+}
+
+/// Run `$body` with AVX2 enabled when the CPU has it (the same lane arithmetic, twice as wide
+/// per instruction; no FMA contraction, so the results are identical to the plain path).
+macro_rules! dispatch {
+    ($name:ident, $avx:ident, ($($arg:ident: $ty:ty),*) -> $ret:ty) => {
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2")]
+        unsafe fn $avx($($arg: $ty),*) -> $ret {
+            $name($($arg),*)
+        }
+    };
+}
+
+/// `(Σ v[n] cos(2π c n), Σ v[n] sin(2π c n))`.
+#[inline(always)]
+fn dtft_sums_impl(v: &[f64], cyc: f64) -> (f64, f64) {
+    let st = Steps::new(cyc);
+    let (rs, rc) = (st.rs, st.rc);
+    let mut re = [0.0; LANES];
+    let mut im = [0.0; LANES];
+    for (b, block) in v.chunks(RESYNC).enumerate() {
+        let (mut zc, mut zs) = st.anchor(b * RESYNC);
+        let mut it = block.chunks_exact(LANES);
+        for q in &mut it {
+            for r in 0..LANES {
+                re[r] += q[r] * zc[r];
+                im[r] += q[r] * zs[r];
+                let c = zc[r] * rc - zs[r] * rs;
+                zs[r] = zc[r] * rs + zs[r] * rc;
+                zc[r] = c;
+            }
+        }
+        for (r, &x) in it.remainder().iter().enumerate() {
+            re[r] += x * zc[r];
+            im[r] += x * zs[r];
+        }
+    }
+    (re.iter().sum(), im.iter().sum())
+}
+
+dispatch!(dtft_sums_impl, dtft_sums_avx2, (v: &[f64], cyc: f64) -> (f64, f64));
+
+#[doc = concat!("See [`", stringify!(dtft_sums_impl), "`]; AVX2 when available.")]
+pub(crate) fn dtft_sums(v: &[f64], cyc: f64) -> (f64, f64) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { dtft_sums_avx2(v, cyc) };
+    }
+    dtft_sums_impl(v, cyc)
+}
+
+/// Least-squares fit of `a cos(2π c n) + b sin(2π c n)` to `x`: returns the five sums
+/// `(Σ x cos, Σ x sin, Σ cos², Σ sin², Σ cos sin)`.
+#[inline(always)]
+fn fit_sums_impl(x: &[f64], cyc: f64) -> [f64; 5] {
+    let st = Steps::new(cyc);
+    let (rs, rc) = (st.rs, st.rc);
+    let mut acc = [[0.0; LANES]; 5];
+    let add = |acc: &mut [[f64; LANES]; 5], r: usize, v: f64, c: f64, s: f64| {
+        acc[0][r] += v * c;
+        acc[1][r] += v * s;
+        acc[2][r] += c * c;
+        acc[3][r] += s * s;
+        acc[4][r] += c * s;
+    };
+    for (b, block) in x.chunks(RESYNC).enumerate() {
+        let (mut zc, mut zs) = st.anchor(b * RESYNC);
+        let mut it = block.chunks_exact(LANES);
+        for q in &mut it {
+            for r in 0..LANES {
+                add(&mut acc, r, q[r], zc[r], zs[r]);
+                let c = zc[r] * rc - zs[r] * rs;
+                zs[r] = zc[r] * rs + zs[r] * rc;
+                zc[r] = c;
+            }
+        }
+        for (r, &v) in it.remainder().iter().enumerate() {
+            add(&mut acc, r, v, zc[r], zs[r]);
+        }
+    }
+    acc.map(|a| a.iter().sum())
+}
+
+dispatch!(fit_sums_impl, fit_sums_avx2, (x: &[f64], cyc: f64) -> [f64; 5]);
+
+#[doc = concat!("See [`", stringify!(fit_sums_impl), "`]; AVX2 when available.")]
+pub(crate) fn fit_sums(x: &[f64], cyc: f64) -> [f64; 5] {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { fit_sums_avx2(x, cyc) };
+    }
+    fit_sums_impl(x, cyc)
+}
+
+/// `x[n] -= a cos(2π c n) + b sin(2π c n)`.
+#[inline(always)]
+fn subtract_sinusoid_impl(x: &mut [f64], cyc: f64, a: f64, b: f64) {
+    let st = Steps::new(cyc);
+    let (rs, rc) = (st.rs, st.rc);
+    for (blk, block) in x.chunks_mut(RESYNC).enumerate() {
+        let (mut zc, mut zs) = st.anchor(blk * RESYNC);
+        let mut it = block.chunks_exact_mut(LANES);
+        for q in &mut it {
+            for r in 0..LANES {
+                q[r] -= a * zc[r] + b * zs[r];
+                let c = zc[r] * rc - zs[r] * rs;
+                zs[r] = zc[r] * rs + zs[r] * rc;
+                zc[r] = c;
+            }
+        }
+        for (r, v) in it.into_remainder().iter_mut().enumerate() {
+            *v -= a * zc[r] + b * zs[r];
+        }
+    }
+}
+
+dispatch!(subtract_sinusoid_impl, subtract_sinusoid_avx2, (x: &mut [f64], cyc: f64, a: f64, b: f64) -> ());
+
+#[doc = concat!("See [`", stringify!(subtract_sinusoid_impl), "`]; AVX2 when available.")]
+pub(crate) fn subtract_sinusoid(x: &mut [f64], cyc: f64, a: f64, b: f64) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { subtract_sinusoid_avx2(x, cyc, a, b) };
+    }
+    subtract_sinusoid_impl(x, cyc, a, b)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn lcg(n: usize, seed: u64) -> Vec<f64> {
+        let mut s = seed;
+        (0..n)
+            .map(|_| {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+            })
+            .collect()
+    }
+
+    #[test]
+    fn sums_match_direct_evaluation() {
+        for (n, cyc) in [
+            (25_600usize, 0.0339843),
+            (1883, 0.4),
+            (13, 0.01),
+            (3001, 0.2501),
+        ] {
+            let x = lcg(n, n as u64);
+            let (mut c, mut s, mut cc, mut ss, mut cs) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            for (i, v) in x.iter().enumerate() {
+                let ph = (cyc * i as f64).fract() * TAU;
+                let (sn, cn) = ph.sin_cos();
+                c += v * cn;
+                s += v * sn;
+                cc += cn * cn;
+                ss += sn * sn;
+                cs += cn * sn;
+            }
+            let tol = 1e-11 * n as f64;
+            let (re, im) = dtft_sums(&x, cyc);
+            assert!((re - c).abs() < tol && (im - s).abs() < tol, "{n} {cyc}");
+            let f = fit_sums(&x, cyc);
+            for (got, want) in f.iter().zip([c, s, cc, ss, cs]) {
+                assert!((got - want).abs() < tol, "{n} {cyc}: {got} vs {want}");
+            }
+            // The dispatched (AVX2 when available) and the plain path agree bit for bit.
+            assert_eq!(dtft_sums_impl(&x, cyc), (re, im));
+            assert_eq!(fit_sums_impl(&x, cyc), f);
+            let mut y = x.clone();
+            subtract_sinusoid(&mut y, cyc, 0.7, -1.3);
+            let mut z = x.clone();
+            subtract_sinusoid_impl(&mut z, cyc, 0.7, -1.3);
+            assert_eq!(y, z);
+            for (i, (a, b)) in y.iter().zip(&x).enumerate() {
+                let ph = (cyc * i as f64).fract() * TAU;
+                let (sn, cn) = ph.sin_cos();
+                // The reference's own phase, `fract(c·i)·2π`, is only good to ≈ c·i·1e-16.
+                let e = (a - (b - 0.7 * cn + 1.3 * sn)).abs();
+                assert!(e < 1e-11, "{n} {cyc} sample {i}: error {e}");
+            }
+        }
+    }
+}
