@@ -14,6 +14,7 @@
 //! switching surface in the new smooth piece. Load jumps ([`OdeSystem::breakpoints`]) are landed
 //! on the same way and the FSAL derivative is re-evaluated after them.
 
+use super::switch::first_root;
 use super::{Integrator, OdeSystem, Stats};
 use crate::error::{Error, Result};
 
@@ -288,13 +289,11 @@ impl<'a, S: OdeSystem + ?Sized> Dopri5<'a, S> {
     /// Earliest switch root in the tentative step `(0, 1]` of size `h`, as a fraction θ, when
     /// one exists beyond the first `theta_min`.
     fn locate_switch(&mut self, h: f64) -> Option<f64> {
-        let ns = self.g_old.len();
         let sys = self.sys;
         sys.switches(self.t + h, &self.ynew, &mut self.g_new);
         let mut y_mid = std::mem::take(&mut self.ytmp);
         self.dense_theta(0.5, &mut y_mid);
         sys.switches(self.t + 0.5 * h, &y_mid, &mut self.g_mid);
-        let mut best: Option<f64> = None;
         // Right after a step that ended on a switch, the state sits within the local error of
         // the switching surface: a root in the first 0.1 % of the next step is that same
         // switch, already handled (chasing it costs a tiny extra step).
@@ -304,58 +303,20 @@ impl<'a, S: OdeSystem + ?Sized> Dopri5<'a, S> {
             1e-12 * self.t.abs().max(1.0) / h
         };
         let mut g = std::mem::take(&mut self.g_work);
-        for i in 0..ns {
-            let (g0, gm, g1) = (self.g_old[i], self.g_mid[i], self.g_new[i]);
-            // Bracket: the first half if it changes sign there, else the second half.
-            let bracket = if g0 != 0.0 && (g0 > 0.0) != (gm > 0.0) {
-                Some((0.0, g0, 0.5, gm))
-            } else if gm != 0.0 && (gm > 0.0) != (g1 > 0.0) && g1 != 0.0 {
-                Some((0.5, gm, 1.0, g1))
-            } else {
-                None
-            };
-            let Some((mut a, mut ga, mut b, mut gb)) = bracket else {
-                continue;
-            };
-            if best.is_some_and(|bst| a >= bst) {
-                continue;
-            }
-            // Illinois method on θ.
-            let mut side = 0i8;
-            for _ in 0..60 {
-                let c = (a * gb - b * ga) / (gb - ga);
-                let c = if c.is_finite() && c > a && c < b {
-                    c
-                } else {
-                    0.5 * (a + b)
-                };
+        let time_tol = 1e-13 * self.t.abs().max(1.0);
+        let best = first_root(
+            &self.g_old,
+            &self.g_mid,
+            &self.g_new,
+            theta_min,
+            h,
+            time_tol,
+            |i, c| {
                 self.dense_theta(c, &mut y_mid);
                 sys.switches(self.t + c * h, &y_mid, &mut g);
-                let gc = g[i];
-                if (gc > 0.0) == (gb > 0.0) {
-                    b = c;
-                    gb = gc;
-                    if side == 1 {
-                        ga *= 0.5;
-                    }
-                    side = 1;
-                } else {
-                    a = c;
-                    ga = gc;
-                    if side == -1 {
-                        gb *= 0.5;
-                    }
-                    side = -1;
-                }
-                if (b - a) * h < 1e-13 * self.t.abs().max(1.0) {
-                    break;
-                }
-            }
-            // `b` is just past the root: the step ends on the far side of the switch.
-            if b > theta_min && best.is_none_or(|bst| b < bst) {
-                best = Some(b);
-            }
-        }
+                g[i]
+            },
+        );
         self.ytmp = y_mid;
         self.g_work = g;
         best

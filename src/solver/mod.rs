@@ -14,6 +14,7 @@
 mod dopri5;
 mod rk4;
 mod rodas4;
+mod switch;
 
 pub use dopri5::{Dopri5, Dopri5Options};
 pub use rk4::Rk4;

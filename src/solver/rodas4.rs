@@ -28,6 +28,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use super::switch::first_root;
 use super::{Integrator, OdeSystem, Stats};
 use crate::error::{Error, Result};
 
@@ -367,65 +368,27 @@ impl<'a, S: OdeSystem + ?Sized> Rodas4<'a, S> {
 
     /// Earliest switch root in the tentative step, as a fraction θ of it.
     fn locate_switch(&mut self, h: f64) -> Option<f64> {
-        let ns = self.g_old.len();
         let sys = self.sys;
         sys.switches(self.t + h, &self.ynew, &mut self.g_new);
         let mut y_mid = vec![0.0; self.n];
         self.dense_theta(0.5, &mut y_mid);
         sys.switches(self.t + 0.5 * h, &y_mid, &mut self.g_mid);
         let theta_min = 1e-12 * self.t.abs().max(1.0) / h;
-        let mut best: Option<f64> = None;
-        let mut g = vec![0.0; ns];
-        for i in 0..ns {
-            let (g0, gm, g1) = (self.g_old[i], self.g_mid[i], self.g_new[i]);
-            let bracket = if g0 != 0.0 && (g0 > 0.0) != (gm > 0.0) {
-                Some((0.0, g0, 0.5, gm))
-            } else if gm != 0.0 && g1 != 0.0 && (gm > 0.0) != (g1 > 0.0) {
-                Some((0.5, gm, 1.0, g1))
-            } else {
-                None
-            };
-            let Some((mut a, mut ga, mut b, mut gb)) = bracket else {
-                continue;
-            };
-            if best.is_some_and(|bst| a >= bst) {
-                continue;
-            }
-            let mut side = 0i8;
-            for _ in 0..60 {
-                let c = (a * gb - b * ga) / (gb - ga);
-                let c = if c.is_finite() && c > a && c < b {
-                    c
-                } else {
-                    0.5 * (a + b)
-                };
+        let time_tol = 1e-13 * self.t.abs().max(1.0);
+        let mut g = vec![0.0; self.g_old.len()];
+        first_root(
+            &self.g_old,
+            &self.g_mid,
+            &self.g_new,
+            theta_min,
+            h,
+            time_tol,
+            |i, c| {
                 self.dense_theta(c, &mut y_mid);
                 sys.switches(self.t + c * h, &y_mid, &mut g);
-                let gc = g[i];
-                if (gc > 0.0) == (gb > 0.0) {
-                    b = c;
-                    gb = gc;
-                    if side == 1 {
-                        ga *= 0.5;
-                    }
-                    side = 1;
-                } else {
-                    a = c;
-                    ga = gc;
-                    if side == -1 {
-                        gb *= 0.5;
-                    }
-                    side = -1;
-                }
-                if (b - a) * h < 1e-13 * self.t.abs().max(1.0) {
-                    break;
-                }
-            }
-            if b > theta_min && best.is_none_or(|bst| b < bst) {
-                best = Some(b);
-            }
-        }
-        best
+                g[i]
+            },
+        )
     }
 
     /// Time of the previous accepted step's start.
