@@ -1,14 +1,27 @@
-//! A bounded load generator for `gearwear serve`: `concurrency` clients each POST a 1 s record
-//! at 25.6 kHz (JSON or f32) in a closed loop for `seconds`, then print p50/p99 latency,
-//! records/s and errors; with `--pid` also the server's RSS (VmRSS, VmHWM) at the end.
+//! A bounded load generator for `gearwear serve`: POSTs a 1 s record at 25.6 kHz (JSON or f32)
+//! over loopback and prints throughput, latency percentiles, errors and — with `--pid` — the
+//! server's RSS and CPU time per record.
+//!
+//! Two modes:
+//! * closed loop (default): `--concurrency` clients each send the next record as soon as the
+//!   previous one is answered — measures capacity;
+//! * open loop (`--rate R`): records are due at a fixed rate of R per second whatever the
+//!   answers do (at most `--concurrency` in flight; a record that finds every slot busy is
+//!   counted as `late` and sent when one frees) — the soak test at a chosen fraction of
+//!   capacity.
+//!
+//! `--report-every S` prints one line per S-second window (records, errors, p50/p99, server
+//! RSS) so a soak shows start and end; the last line is a JSON summary for scripts.
 //!
 //! ```sh
 //! cargo run --release --example loadgen -- --url http://127.0.0.1:8080 --key gw_… \
 //!     --concurrency 4 --seconds 20 --format json --pid $(pgrep -n gearwear)
+//! cargo run --release --example loadgen -- --key gw_… --rate 120 --seconds 600 \
+//!     --report-every 60 --pid $(pgrep -n gearwear)
 //! ```
 
 use std::f64::consts::TAU;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 fn arg(args: &[String], name: &str, default: &str) -> String {
@@ -19,16 +32,41 @@ fn arg(args: &[String], name: &str, default: &str) -> String {
         .unwrap_or_else(|| default.to_string())
 }
 
-fn rss(pid: &str) -> String {
-    std::fs::read_to_string(format!("/proc/{pid}/status"))
-        .map(|s| {
-            s.lines()
-                .filter(|l| l.starts_with("VmRSS") || l.starts_with("VmHWM"))
-                .map(|l| l.split_whitespace().collect::<Vec<_>>().join(" "))
-                .collect::<Vec<_>>()
-                .join(", ")
-        })
-        .unwrap_or_else(|_| "n/a".into())
+/// `(VmRSS kB, VmHWM kB)` of a process.
+fn rss_kb(pid: &str) -> Option<(u64, u64)> {
+    let s = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    let field = |name: &str| {
+        s.lines()
+            .find(|l| l.starts_with(name))
+            .and_then(|l| l.split_whitespace().nth(1))
+            .and_then(|v| v.parse().ok())
+    };
+    Some((field("VmRSS:")?, field("VmHWM:")?))
+}
+
+/// User + system CPU seconds of a process (`/proc/PID/stat`, fields 14 and 15, in clock ticks
+/// of 1/100 s — the kernel's USER_HZ on Linux).
+fn cpu_seconds(pid: &str) -> Option<f64> {
+    let s = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // The command name (field 2) is in parentheses and may contain spaces.
+    let rest = &s[s.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ut: f64 = f.get(11)?.parse().ok()?;
+    let st: f64 = f.get(12)?.parse().ok()?;
+    Some((ut + st) / 100.0)
+}
+
+fn percentile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    sorted[((sorted.len() as f64 - 1.0) * p).round() as usize] * 1e3
+}
+
+#[derive(Default)]
+struct Window {
+    lat: Vec<f64>,
+    errors: usize,
 }
 
 #[tokio::main(flavor = "multi_thread", worker_threads = 2)]
@@ -38,6 +76,9 @@ async fn main() {
     let key = arg(&args, "--key", "");
     let conc: usize = arg(&args, "--concurrency", "4").parse().unwrap();
     let secs: f64 = arg(&args, "--seconds", "10").parse().unwrap();
+    let rate: f64 = arg(&args, "--rate", "0").parse().unwrap();
+    let every: f64 = arg(&args, "--report-every", "0").parse().unwrap();
+    let machines: usize = arg(&args, "--machines", "4").parse().unwrap();
     let format = arg(&args, "--format", "json");
     let pid = arg(&args, "--pid", "");
     let fs = 25_600.0;
@@ -60,80 +101,181 @@ async fn main() {
             serde_json::to_vec(&serde_json::json!({"sample_rate_hz": fs, "samples": x})).unwrap();
         (b, "application/json", "")
     };
-    println!("body: {} bytes ({ct})", body.len());
-    let body = Arc::new(body);
+    println!(
+        "body: {} bytes ({ct}); {}",
+        body.len(),
+        if rate > 0.0 {
+            format!("open loop at {rate} records/s, at most {conc} in flight")
+        } else {
+            format!("closed loop, concurrency {conc}")
+        }
+    );
+    // Shared, reference-counted: sending does not copy the body.
+    let body_bytes = axum::body::Bytes::from(body);
     let client = reqwest::Client::builder()
         .pool_max_idle_per_host(conc)
         .build()
         .unwrap();
-    let end = Instant::now() + Duration::from_secs_f64(secs);
+    let window = Arc::new(Mutex::new(Window::default()));
+    let all = Arc::new(Mutex::new(Window::default()));
+    let slots = Arc::new(tokio::sync::Semaphore::new(conc));
     let start = Instant::now();
-    let mut tasks = Vec::new();
-    for w in 0..conc {
-        let (client, body, url, key) = (client.clone(), body.clone(), url.clone(), key.clone());
-        tasks.push(tokio::spawn(async move {
-            let mut lat = Vec::new();
-            let mut errors = 0usize;
-            let mut i = 0usize;
-            while Instant::now() < end {
-                let t = Instant::now();
-                let r = client
-                    .post(format!("{url}/v1/machines/load-{w}/records{q}"))
-                    .bearer_auth(&key)
-                    .header("content-type", ct)
-                    .header(
-                        "idempotency-key",
-                        format!("load-{w}-{i}-{}", std::process::id()),
-                    )
-                    .body(body.as_ref().clone())
-                    .send()
-                    .await;
-                match r {
-                    Ok(r) if r.status() == 201 => {
-                        let _ = r.bytes().await;
-                        lat.push(t.elapsed().as_secs_f64());
-                    }
-                    Ok(r) => {
-                        errors += 1;
-                        if errors < 3 {
-                            eprintln!("{}: {}", r.status(), r.text().await.unwrap_or_default());
-                        }
-                    }
-                    Err(e) => {
-                        errors += 1;
-                        eprintln!("{e}");
-                    }
-                }
-                i += 1;
+    let end = start + Duration::from_secs_f64(secs);
+    let cpu0 = cpu_seconds(&pid);
+    let self_cpu0 = cpu_seconds("self");
+    let rss0 = rss_kb(&pid);
+
+    // Periodic report.
+    let reporter = {
+        let (window, pid) = (window.clone(), pid.clone());
+        tokio::spawn(async move {
+            if every <= 0.0 {
+                return;
             }
-            (lat, errors)
+            let mut t = tokio::time::interval_at(
+                tokio::time::Instant::now() + Duration::from_secs_f64(every),
+                Duration::from_secs_f64(every),
+            );
+            loop {
+                t.tick().await;
+                let w = std::mem::take(&mut *window.lock().unwrap());
+                let mut l = w.lat;
+                l.sort_by(|a, b| a.partial_cmp(b).unwrap());
+                let (rss, _) = rss_kb(&pid).unwrap_or((0, 0));
+                println!(
+                    "t={:>6.0}s  {:>6} ok  {:>3} errors  {:>7.1} rec/s  p50 {:>6.2} ms  p99 {:>6.2} ms  server RSS {:.1} MB",
+                    start.elapsed().as_secs_f64(),
+                    l.len(),
+                    w.errors,
+                    l.len() as f64 / every,
+                    percentile(&l, 0.5),
+                    percentile(&l, 0.99),
+                    rss as f64 / 1024.0
+                );
+            }
+        })
+    };
+
+    let late = Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let mut tasks = Vec::new();
+    let mut i = 0usize;
+    loop {
+        let due = if rate > 0.0 {
+            start + Duration::from_secs_f64(i as f64 / rate)
+        } else {
+            Instant::now()
+        };
+        if due >= end {
+            break;
+        }
+        if rate > 0.0 {
+            tokio::time::sleep_until(due.into()).await;
+        }
+        let permit = match slots.clone().try_acquire_owned() {
+            Ok(p) => p,
+            Err(_) => {
+                if rate > 0.0 {
+                    late.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                }
+                slots.clone().acquire_owned().await.unwrap()
+            }
+        };
+        if Instant::now() >= end {
+            break;
+        }
+        let (client, body, url, key) =
+            (client.clone(), body_bytes.clone(), url.clone(), key.clone());
+        let (window, all) = (window.clone(), all.clone());
+        let m = i % machines.max(1);
+        tasks.push(tokio::spawn(async move {
+            let _permit = permit;
+            let t = Instant::now();
+            let r = client
+                .post(format!("{url}/v1/machines/load-{m}/records{q}"))
+                .bearer_auth(&key)
+                .header("content-type", ct)
+                .header(
+                    "idempotency-key",
+                    format!("load-{i}-{}", std::process::id()),
+                )
+                .body(body)
+                .send()
+                .await;
+            let ok = match r {
+                Ok(r) if r.status() == 201 => r.bytes().await.is_ok(),
+                Ok(r) => {
+                    eprintln!("{}: {}", r.status(), r.text().await.unwrap_or_default());
+                    false
+                }
+                Err(e) => {
+                    eprintln!("{e}");
+                    false
+                }
+            };
+            let dt = t.elapsed().as_secs_f64();
+            for w in [&window, &all] {
+                let mut w = w.lock().unwrap();
+                if ok {
+                    w.lat.push(dt);
+                } else {
+                    w.errors += 1;
+                }
+            }
         }));
+        i += 1;
+        if tasks.len() > 4 * conc {
+            tasks.retain(|t| !t.is_finished());
+        }
     }
-    let mut lat = Vec::new();
-    let mut errors = 0;
     for t in tasks {
-        let (l, e) = t.await.unwrap();
-        lat.extend(l);
-        errors += e;
+        t.await.unwrap();
     }
+    reporter.abort();
     let wall = start.elapsed().as_secs_f64();
+    let all = std::mem::take(&mut *all.lock().unwrap());
+    let mut lat = all.lat;
     lat.sort_by(|a, b| a.partial_cmp(b).unwrap());
-    let q = |p: f64| lat[((lat.len() as f64 - 1.0) * p).round() as usize] * 1e3;
+    let n = lat.len();
     println!(
-        "{} records in {wall:.1} s = {:.1} records/s, {errors} errors, concurrency {conc}",
-        lat.len(),
-        lat.len() as f64 / wall
+        "{n} records in {wall:.1} s = {:.1} records/s, {} errors, {} late",
+        n as f64 / wall,
+        all.errors,
+        late.load(std::sync::atomic::Ordering::Relaxed)
     );
-    if !lat.is_empty() {
+    let (p50, p90, p99, max) = (
+        percentile(&lat, 0.5),
+        percentile(&lat, 0.9),
+        percentile(&lat, 0.99),
+        percentile(&lat, 1.0),
+    );
+    println!("latency ms: p50 {p50:.2}, p90 {p90:.2}, p99 {p99:.2}, max {max:.2}");
+    let server_cpu = match (cpu0, cpu_seconds(&pid)) {
+        (Some(a), Some(b)) if n > 0 => (b - a) / n as f64 * 1e3,
+        _ => f64::NAN,
+    };
+    let client_cpu = match (self_cpu0, cpu_seconds("self")) {
+        (Some(a), Some(b)) if n > 0 => (b - a) / n as f64 * 1e3,
+        _ => f64::NAN,
+    };
+    let rss1 = rss_kb(&pid);
+    if !pid.is_empty() {
         println!(
-            "latency ms: p50 {:.2}, p90 {:.2}, p99 {:.2}, max {:.2}",
-            q(0.5),
-            q(0.9),
-            q(0.99),
-            q(1.0)
+            "server CPU per record {server_cpu:.2} ms, load generator CPU per record {client_cpu:.2} ms; \
+             server RSS start {:.1} MB, end {:.1} MB, peak {:.1} MB",
+            rss0.map_or(f64::NAN, |r| r.0 as f64 / 1024.0),
+            rss1.map_or(f64::NAN, |r| r.0 as f64 / 1024.0),
+            rss1.map_or(f64::NAN, |r| r.1 as f64 / 1024.0),
         );
     }
-    if !pid.is_empty() {
-        println!("server {}", rss(&pid));
-    }
+    println!(
+        "{}",
+        serde_json::json!({
+            "records": n, "errors": all.errors, "late": late.load(std::sync::atomic::Ordering::Relaxed),
+            "seconds": wall, "records_per_second": n as f64 / wall,
+            "p50_ms": p50, "p90_ms": p90, "p99_ms": p99, "max_ms": max,
+            "server_cpu_ms_per_record": server_cpu, "client_cpu_ms_per_record": client_cpu,
+            "rss_start_kb": rss0.map(|r| r.0), "rss_end_kb": rss1.map(|r| r.0), "rss_peak_kb": rss1.map(|r| r.1),
+            "format": format, "rate": rate, "concurrency": conc,
+        })
+    );
 }

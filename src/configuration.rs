@@ -24,6 +24,9 @@ pub struct Settings {
     /// Raw samples are kept this long (0: never stored); metadata, features and diagnoses
     /// are kept forever.
     pub raw_retention: Duration,
+    /// Stored answers to `Idempotency-Key`s are kept this long (default 7 days): a client
+    /// retrying within it gets the original answer, later the key is forgotten.
+    pub idempotency_retention: Duration,
 }
 
 /// Request limits. Each refusal is a problem+json naming the limit.
@@ -101,6 +104,7 @@ impl Default for Settings {
                 timeout: Duration::from_secs(10),
             },
             raw_retention: Duration::from_secs(30 * 24 * 3600),
+            idempotency_retention: Duration::from_secs(7 * 24 * 3600),
         }
     }
 }

@@ -53,6 +53,10 @@ pub struct ServeArgs {
     /// Days to keep raw samples (0: do not store them).
     #[arg(long, default_value_t = 30.0)]
     pub raw_retention_days: f64,
+    /// Days to keep the stored answers to `Idempotency-Key`s (a retry within it is answered
+    /// with the original result, later the key is forgotten).
+    #[arg(long, default_value_t = 7.0)]
+    pub idempotency_retention_days: f64,
     /// Wear degree (ea) at which a machine turns `warning`.
     #[arg(long, default_value_t = 0.5)]
     pub warning_ea: f64,
@@ -90,6 +94,13 @@ impl ServeArgs {
             bail!("--raw-retention-days must be ≥ 0");
         }
         s.raw_retention = Duration::from_secs_f64(self.raw_retention_days * 86_400.0);
+        s.idempotency_retention = Duration::from_secs_f64(
+            86_400.0
+                * pos(
+                    "idempotency-retention-days",
+                    self.idempotency_retention_days,
+                )?,
+        );
         if !(self.warning_ea < self.alarm_ea) {
             bail!("--warning-ea must be below --alarm-ea");
         }

@@ -48,6 +48,8 @@ pub struct AppState(Arc<Inner>);
 pub struct Inner {
     pub settings: Settings,
     pub store: Arc<dyn Store>,
+    /// Group commit of accepted records (one writer, one transaction per batch).
+    pub ingest_queue: crate::store::queue::IngestQueue,
     pub diagnoser: Arc<dyn Diagnoser>,
     pub metrics: metrics::Metrics,
     pub limiter: auth::RateLimiter,
@@ -62,6 +64,9 @@ impl std::ops::Deref for AppState {
     }
 }
 
+/// Most records one group commit writes.
+const INGEST_BATCH: usize = 32;
+
 impl AppState {
     pub fn new(settings: Settings, store: Arc<dyn Store>, diagnoser: Arc<dyn Diagnoser>) -> Self {
         let limiter =
@@ -70,8 +75,10 @@ impl AppState {
             .redirect(reqwest::redirect::Policy::none())
             .build()
             .expect("HTTP client");
+        let ingest_queue = crate::store::queue::IngestQueue::start(store.clone(), INGEST_BATCH);
         AppState(Arc::new(Inner {
             settings,
+            ingest_queue,
             store,
             diagnoser,
             metrics: metrics::Metrics::default(),
@@ -234,7 +241,7 @@ pub async fn serve(
     res
 }
 
-/// Drops raw samples past the retention, hourly.
+/// Drops raw samples and idempotency answers past their retention, hourly.
 async fn retention_task(app: AppState, mut stop: watch::Receiver<bool>) {
     let keep = app.settings.raw_retention;
     loop {
@@ -245,6 +252,14 @@ async fn retention_task(app: AppState, mut stop: watch::Receiver<bool>) {
                 Ok(_) => {}
                 Err(e) => tracing::warn!(error = %e, "retention: store unavailable"),
             }
+        }
+        let before = crate::store::now_ms() - app.settings.idempotency_retention.as_millis() as i64;
+        match app.store.purge_idempotency(before).await {
+            Ok(n) if n > 0 => {
+                tracing::info!(keys = n, "idempotency answers past retention dropped")
+            }
+            Ok(_) => {}
+            Err(e) => tracing::warn!(error = %e, "retention: store unavailable"),
         }
         tokio::select! {
             _ = tokio::time::sleep(Duration::from_secs(3600)) => {}

@@ -493,17 +493,20 @@ async fn ingest(
         }
     };
     let key_id = caller.key_id.clone().unwrap_or_default();
+    // The body is hashed once (it is stored as the record's `sha256`); the request hash
+    // covers machine, content type, query and that body hash.
+    let body_sha256 = hex::encode(Sha256::digest(&bytes));
     let request_hash = {
         let mut h = Sha256::new();
         for part in [
             machine_id.as_bytes(),
             format.mime().as_bytes(),
             query.as_deref().unwrap_or("").as_bytes(),
+            body_sha256.as_bytes(),
         ] {
             h.update(part);
             h.update([0u8]);
         }
-        h.update(&bytes);
         hex::encode(h.finalize())
     };
     if let Some(k) = &idem_key
@@ -571,7 +574,7 @@ async fn ingest(
             sample_rate_hz: input.sample_rate_hz,
             shaft_hz: input.shaft_hz,
             sample_count: input.samples.len() as i64,
-            sha256: hex::encode(Sha256::digest(&bytes)),
+            sha256: body_sha256,
             features: out.features.to_string(),
             samples: keep_raw.then(|| f32_bytes(&input.samples)),
         },
@@ -597,7 +600,7 @@ async fn ingest(
             response: response_text.clone(),
         }),
     };
-    match app.store.ingest(&ing).await {
+    match app.ingest_queue.ingest(ing).await {
         Ok(()) => {}
         Err(StoreError::Conflict(_)) if idem_key.is_some() => {
             // A concurrent request with the same key committed first: answer as it did.

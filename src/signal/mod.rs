@@ -32,7 +32,7 @@ mod spectrum;
 mod stats;
 mod window;
 
-pub(crate) use phasor::dtft_sums;
+pub(crate) use phasor::{dtft_sums, unit_phasors};
 pub use plan::PlanCache;
 pub use spectrum::{Spectrum, amplitude_spectrum, line_amplitude, welch};
 pub use stats::{crest_factor, kurtosis, rms, try_crest_factor, try_kurtosis, try_rms};

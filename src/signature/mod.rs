@@ -221,12 +221,13 @@ pub fn measure_lines(x: &[f64], fs: f64, f1: f64, lines: &[LineDef]) -> Result<L
     let mut kre = vec![0.0; l * nl];
     let mut kim = vec![0.0; l * nl];
     let mut ksum: Vec<(f64, f64)> = Vec::with_capacity(nl);
+    let (mut pc, mut ps) = (vec![0.0; l], vec![0.0; l]);
     for (q, ln) in lines.iter().enumerate() {
         let c = ln.ratio * f1 / fs;
+        crate::signal::unit_phasors(c, &mut pc, &mut ps);
         let (mut sr, mut si) = (0.0, 0.0);
         for (n, wv) in w.iter().enumerate() {
-            let ph = (c * n as f64).fract() * TAU;
-            let (s, co) = ph.sin_cos();
+            let (s, co) = (ps[n], pc[n]);
             let (re, im) = (wv * co, -wv * s);
             kre[n * nl + q] = re;
             kim[n * nl + q] = im;

@@ -22,6 +22,7 @@ use serde::Serialize;
 use crate::keys::Scope;
 
 pub mod postgres;
+pub mod queue;
 pub mod sqlite;
 
 /// Storage errors.
@@ -36,11 +37,17 @@ pub enum StoreError {
     /// Migrations failed at start-up.
     #[error("migration: {0}")]
     Migrate(#[from] sqlx::migrate::MigrateError),
+    /// One error shared by every record of a failed group commit.
+    #[error("{0}")]
+    Shared(Arc<StoreError>),
 }
 
 impl StoreError {
     /// Is this the database being unreachable (→ 503 + Retry-After) rather than a bug?
     pub fn is_unavailable(&self) -> bool {
+        if let StoreError::Shared(e) = self {
+            return e.is_unavailable();
+        }
         matches!(
             self,
             StoreError::Db(
@@ -248,6 +255,10 @@ pub trait Store: Send + Sync + 'static {
     /// Write an accepted record in one transaction. `StoreError::Conflict` when the
     /// idempotency key was stored meanwhile by a concurrent request.
     async fn ingest(&self, ing: &Ingest) -> StoreResult<()>;
+    /// Write several accepted records in ONE transaction (one commit, one fsync — group
+    /// commit), each in its own savepoint: the result of each, in order. When the commit
+    /// fails, every record gets that error and none is stored.
+    async fn ingest_batch(&self, ings: &[Ingest]) -> Vec<StoreResult<()>>;
 
     async fn list_machines(&self) -> StoreResult<Vec<MachineRow>>;
     async fn get_machine(&self, id: &str) -> StoreResult<Option<MachineRow>>;
@@ -285,6 +296,8 @@ pub trait Store: Send + Sync + 'static {
     async fn list_attempts(&self, delivery_id: &str) -> StoreResult<Vec<AttemptRow>>;
     /// Drop raw samples of records received before `before`; returns how many.
     async fn purge_samples(&self, before: i64) -> StoreResult<u64>;
+    /// Forget the stored answers to idempotency keys created before `before`; returns how many.
+    async fn purge_idempotency(&self, before: i64) -> StoreResult<u64>;
 
     /// Store a machine's calibration, replacing the one it had.
     async fn put_calibration(&self, c: &CalibrationRow) -> StoreResult<()>;
@@ -399,6 +412,122 @@ macro_rules! impl_store {
             matches!(e, sqlx::Error::Database(d) if d.is_unique_violation())
         }
 
+        /// Every write of one accepted record, inside the caller's transaction.
+        async fn ingest_in(tx: &mut sqlx::Transaction<'_, $db>, ing: &Ingest) -> StoreResult<()> {
+                let (rec, d) = (&ing.record, &ing.diagnosis);
+                // A write first: SQLite then takes its write lock at once (waiting on the busy
+                // timeout) instead of failing to upgrade a read lock later.
+                sqlx::query(
+                    "INSERT INTO machines (id, created_at, updated_at) VALUES ($1, $2, $2) \
+                     ON CONFLICT (id) DO NOTHING",
+                )
+                .bind(&rec.machine_id)
+                .bind(rec.received_at)
+                .execute(&mut **tx)
+                .await?;
+                if let Some(i) = &ing.idempotency {
+                    let r = sqlx::query(
+                        "INSERT INTO idempotency_keys \
+                         (key_id, idem_key, request_hash, status, response, created_at) \
+                         VALUES ($1, $2, $3, $4, $5, $6)",
+                    )
+                    .bind(&i.key_id)
+                    .bind(&i.idem_key)
+                    .bind(&i.request_hash)
+                    .bind(i.status)
+                    .bind(&i.response)
+                    .bind(rec.received_at)
+                    .execute(&mut **tx)
+                    .await;
+                    if let Err(e) = r {
+                        return Err(if is_unique_violation(&e) {
+                            StoreError::Conflict("idempotency key".into())
+                        } else {
+                            e.into()
+                        });
+                    }
+                }
+                let prev: String =
+                    sqlx::query("SELECT alert_level FROM machines WHERE id = $1")
+                        .bind(&rec.machine_id)
+                        .fetch_one(&mut **tx)
+                        .await?
+                        .try_get("alert_level")?;
+                sqlx::query(
+                    "INSERT INTO records (id, machine_id, received_at, recorded_at, sensor, \
+                     content_type, sample_rate_hz, shaft_hz, sample_count, sha256, features, \
+                     samples) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12)",
+                )
+                .bind(&rec.id)
+                .bind(&rec.machine_id)
+                .bind(rec.received_at)
+                .bind(&rec.recorded_at)
+                .bind(&rec.sensor)
+                .bind(&rec.content_type)
+                .bind(rec.sample_rate_hz)
+                .bind(rec.shaft_hz)
+                .bind(rec.sample_count)
+                .bind(&rec.sha256)
+                .bind(&rec.features)
+                .bind(&rec.samples)
+                .execute(&mut **tx)
+                .await?;
+                sqlx::query(
+                    "INSERT INTO diagnoses (id, record_id, machine_id, created_at, ea_estimate, \
+                     ea_lower, ea_upper, alert_level, motion_state, body, spectrum) \
+                     VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11)",
+                )
+                .bind(&d.id)
+                .bind(&d.record_id)
+                .bind(&d.machine_id)
+                .bind(d.created_at)
+                .bind(d.ea_estimate)
+                .bind(d.ea_lower)
+                .bind(d.ea_upper)
+                .bind(&d.alert_level)
+                .bind(&d.motion_state)
+                .bind(&d.body)
+                .bind(&d.spectrum)
+                .execute(&mut **tx)
+                .await?;
+                sqlx::query(
+                    "UPDATE machines SET updated_at = $2, record_count = record_count + 1, \
+                     last_diagnosis_id = $3, alert_level = $4 WHERE id = $1",
+                )
+                .bind(&rec.machine_id)
+                .bind(rec.received_at)
+                .bind(&d.id)
+                .bind(&d.alert_level)
+                .execute(&mut **tx)
+                .await?;
+                let hooks = sqlx::query("SELECT * FROM webhooks WHERE deleted_at IS NULL")
+                    .fetch_all(&mut **tx)
+                    .await?;
+                let event_id = new_id();
+                let events = ingest_events(&prev, ing, &event_id);
+                for h in &hooks {
+                    let h = webhook_row(h)?;
+                    for (event, payload) in &events {
+                        if !h.events.iter().any(|e| e == event || e == "*") {
+                            continue;
+                        }
+                        sqlx::query(
+                            "INSERT INTO deliveries (id, webhook_id, event, payload, status, \
+                             attempts, next_attempt_at, created_at) \
+                             VALUES ($1, $2, $3, $4, 'pending', 0, $5, $5)",
+                        )
+                        .bind(new_id())
+                        .bind(&h.id)
+                        .bind(event)
+                        .bind(payload)
+                        .bind(rec.received_at)
+                        .execute(&mut **tx)
+                        .await?;
+                    }
+                }
+                Ok(())
+            }
+
         #[async_trait::async_trait]
         impl Store for $ty {
             fn kind(&self) -> &'static str {
@@ -488,118 +617,8 @@ macro_rules! impl_store {
             }
 
             async fn ingest(&self, ing: &Ingest) -> StoreResult<()> {
-                let (rec, d) = (&ing.record, &ing.diagnosis);
                 let mut tx = self.pool.begin().await?;
-                // A write first: SQLite then takes its write lock at once (waiting on the busy
-                // timeout) instead of failing to upgrade a read lock later.
-                sqlx::query(
-                    "INSERT INTO machines (id, created_at, updated_at) VALUES ($1, $2, $2) \
-                     ON CONFLICT (id) DO NOTHING",
-                )
-                .bind(&rec.machine_id)
-                .bind(rec.received_at)
-                .execute(&mut *tx)
-                .await?;
-                if let Some(i) = &ing.idempotency {
-                    let r = sqlx::query(
-                        "INSERT INTO idempotency_keys \
-                         (key_id, idem_key, request_hash, status, response, created_at) \
-                         VALUES ($1, $2, $3, $4, $5, $6)",
-                    )
-                    .bind(&i.key_id)
-                    .bind(&i.idem_key)
-                    .bind(&i.request_hash)
-                    .bind(i.status)
-                    .bind(&i.response)
-                    .bind(rec.received_at)
-                    .execute(&mut *tx)
-                    .await;
-                    if let Err(e) = r {
-                        return Err(if is_unique_violation(&e) {
-                            StoreError::Conflict("idempotency key".into())
-                        } else {
-                            e.into()
-                        });
-                    }
-                }
-                let prev: String =
-                    sqlx::query("SELECT alert_level FROM machines WHERE id = $1")
-                        .bind(&rec.machine_id)
-                        .fetch_one(&mut *tx)
-                        .await?
-                        .try_get("alert_level")?;
-                sqlx::query(
-                    "INSERT INTO records (id, machine_id, received_at, recorded_at, sensor, \
-                     content_type, sample_rate_hz, shaft_hz, sample_count, sha256, features, \
-                     samples) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12)",
-                )
-                .bind(&rec.id)
-                .bind(&rec.machine_id)
-                .bind(rec.received_at)
-                .bind(&rec.recorded_at)
-                .bind(&rec.sensor)
-                .bind(&rec.content_type)
-                .bind(rec.sample_rate_hz)
-                .bind(rec.shaft_hz)
-                .bind(rec.sample_count)
-                .bind(&rec.sha256)
-                .bind(&rec.features)
-                .bind(&rec.samples)
-                .execute(&mut *tx)
-                .await?;
-                sqlx::query(
-                    "INSERT INTO diagnoses (id, record_id, machine_id, created_at, ea_estimate, \
-                     ea_lower, ea_upper, alert_level, motion_state, body, spectrum) \
-                     VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11)",
-                )
-                .bind(&d.id)
-                .bind(&d.record_id)
-                .bind(&d.machine_id)
-                .bind(d.created_at)
-                .bind(d.ea_estimate)
-                .bind(d.ea_lower)
-                .bind(d.ea_upper)
-                .bind(&d.alert_level)
-                .bind(&d.motion_state)
-                .bind(&d.body)
-                .bind(&d.spectrum)
-                .execute(&mut *tx)
-                .await?;
-                sqlx::query(
-                    "UPDATE machines SET updated_at = $2, record_count = record_count + 1, \
-                     last_diagnosis_id = $3, alert_level = $4 WHERE id = $1",
-                )
-                .bind(&rec.machine_id)
-                .bind(rec.received_at)
-                .bind(&d.id)
-                .bind(&d.alert_level)
-                .execute(&mut *tx)
-                .await?;
-                let hooks = sqlx::query("SELECT * FROM webhooks WHERE deleted_at IS NULL")
-                    .fetch_all(&mut *tx)
-                    .await?;
-                let event_id = new_id();
-                let events = ingest_events(&prev, ing, &event_id);
-                for h in &hooks {
-                    let h = webhook_row(h)?;
-                    for (event, payload) in &events {
-                        if !h.events.iter().any(|e| e == event || e == "*") {
-                            continue;
-                        }
-                        sqlx::query(
-                            "INSERT INTO deliveries (id, webhook_id, event, payload, status, \
-                             attempts, next_attempt_at, created_at) \
-                             VALUES ($1, $2, $3, $4, 'pending', 0, $5, $5)",
-                        )
-                        .bind(new_id())
-                        .bind(&h.id)
-                        .bind(event)
-                        .bind(payload)
-                        .bind(rec.received_at)
-                        .execute(&mut *tx)
-                        .await?;
-                    }
-                }
+                ingest_in(&mut tx, ing).await?;
                 tx.commit().await.map_err(|e| {
                     if is_unique_violation(&e) {
                         StoreError::Conflict("idempotency key".into())
@@ -608,6 +627,37 @@ macro_rules! impl_store {
                     }
                 })?;
                 Ok(())
+            }
+
+            async fn ingest_batch(&self, ings: &[Ingest]) -> Vec<StoreResult<()>> {
+                if ings.len() == 1 {
+                    return vec![self.ingest(&ings[0]).await];
+                }
+                let mut tx = match self.pool.begin().await {
+                    Ok(tx) => tx,
+                    Err(e) => {
+                        let e = Arc::new(StoreError::from(e));
+                        return ings.iter().map(|_| Err(StoreError::Shared(e.clone()))).collect();
+                    }
+                };
+                let mut out = Vec::with_capacity(ings.len());
+                for ing in ings {
+                    // Each record in its own savepoint: one that fails (a duplicate idempotency
+                    // key) is rolled back alone and answered with its own error.
+                    let r = async {
+                        let mut sp = sqlx::Acquire::begin(&mut *tx).await?;
+                        ingest_in(&mut sp, ing).await?;
+                        sp.commit().await?;
+                        Ok::<(), StoreError>(())
+                    }
+                    .await;
+                    out.push(r);
+                }
+                if let Err(e) = tx.commit().await {
+                    let e = Arc::new(StoreError::from(e));
+                    return ings.iter().map(|_| Err(StoreError::Shared(e.clone()))).collect();
+                }
+                out
             }
 
             async fn list_machines(&self) -> StoreResult<Vec<MachineRow>> {
@@ -851,6 +901,14 @@ macro_rules! impl_store {
                 .bind(before)
                 .execute(&self.pool)
                 .await?;
+                Ok(r.rows_affected())
+            }
+
+            async fn purge_idempotency(&self, before: i64) -> StoreResult<u64> {
+                let r = sqlx::query("DELETE FROM idempotency_keys WHERE created_at < $1")
+                    .bind(before)
+                    .execute(&self.pool)
+                    .await?;
                 Ok(r.rows_affected())
             }
 

@@ -8,4 +8,5 @@ mod browser;
 mod calibration;
 mod cli;
 mod openapi;
+mod store;
 mod webhooks;
