@@ -138,10 +138,9 @@ fn unit_phasors_impl(cyc: f64, cos: &mut [f64], sin: &mut [f64]) {
             }
         }
         let done = cb.len() / LANES * LANES;
-        for r in 0..cb.len() - done {
-            cb[done + r] = zc[r];
-            sb[done + r] = zs[r];
-        }
+        let rest = cb.len() - done;
+        cb[done..].copy_from_slice(&zc[..rest]);
+        sb[done..].copy_from_slice(&zs[..rest]);
     }
 }
 
