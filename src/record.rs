@@ -202,6 +202,11 @@ fn parse_csv(bytes: &[u8], opts: &ReadOptions, origin: &str) -> Result<Record> {
             continue;
         }
         let fields = split_fields(line);
+        if fields.is_empty() {
+            // Nothing but quotes and spaces (`"`): no field, like a blank line. Taken as a row
+            // of width 0 it let the next line set the width, and indexing it panicked.
+            continue;
+        }
         let nums: Vec<Option<f64>> = fields.iter().map(|f| parse_number(f)).collect();
         if n_rows == 0 && header.is_none() && nums.iter().any(|v| v.is_none()) {
             header = Some(fields.iter().map(|s| s.to_string()).collect());
@@ -641,5 +646,15 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("no finite sample rate"), "{e}");
+    }
+
+    #[test]
+    fn csv_line_of_only_quotes_is_skipped() {
+        // fuzz/regressions/csv/quote-only-line-then-number.csv, found by `cargo fuzz run csv`:
+        // the line `"` has no field; it became an empty row and `r[value_col]` panicked.
+        let r = parse_record(b"\"\n000.03554\n", Format::Csv, &opts(Some(1.0), None), "t").unwrap();
+        assert_eq!(r.samples, vec![0.03554]);
+        let r = parse_record(b"\"  \"\n1\n2\n", Format::Csv, &opts(Some(1.0), None), "t").unwrap();
+        assert_eq!(r.samples, vec![1.0, 2.0]);
     }
 }
