@@ -28,6 +28,8 @@ pub mod configuration;
 pub mod diagnosis;
 pub mod diagnosis_cli;
 pub mod error;
+#[doc(hidden)]
+pub mod fuzzing;
 pub mod keys;
 pub mod model;
 pub mod model_b_cli;

@@ -100,14 +100,38 @@ pub fn read_record(path: &Path, opts: &ReadOptions) -> Result<Record> {
         source,
     })?;
     if name.to_ascii_lowercase().ends_with(".gz") {
-        let mut out = Vec::new();
-        flate2::read::MultiGzDecoder::new(&bytes[..])
-            .read_to_end(&mut out)
-            .map_err(|e| fmt_err(&name, format!("gzip decompression failed: {e}")))?;
-        bytes = out;
+        bytes = gunzip(&bytes, &name, MAX_DECOMPRESSED_BYTES)?;
     }
     let format = opts.format.unwrap_or_else(|| Format::from_path(path));
     parse_record(&bytes, format, opts, &name)
+}
+
+/// Largest decompressed size [`read_record`] accepts from a `.gz` file: 256 MiB, about three
+/// times an 80 s `time,value` CSV at 25.6 kHz (the service's record limit). A stream that
+/// expands further (a "gzip bomb") is refused instead of filling memory.
+pub const MAX_DECOMPRESSED_BYTES: usize = 256 << 20;
+
+/// Decompress a gzip stream (several concatenated members allowed), refusing more than `limit`
+/// output bytes with [`Error::RecordFormat`] ("expands beyond …"): decoding stops one byte
+/// past `limit`, so memory stays below about twice `limit` whatever size the stream claims.
+/// `origin` names the input in errors.
+pub fn gunzip(bytes: &[u8], origin: &str, limit: usize) -> Result<Vec<u8>> {
+    let mut out = Vec::new();
+    // Read one byte past the limit: reaching it means the stream is longer than allowed.
+    flate2::read::MultiGzDecoder::new(bytes)
+        .take(limit as u64 + 1)
+        .read_to_end(&mut out)
+        .map_err(|e| fmt_err(origin, format!("gzip decompression failed: {e}")))?;
+    if out.len() > limit {
+        return Err(fmt_err(
+            origin,
+            format!(
+                "the gzip stream expands beyond {limit} bytes (the limit for a compressed \
+                 record); decompress it and pass the file itself"
+            ),
+        ));
+    }
+    Ok(out)
 }
 
 /// Parse a record from bytes (already decompressed); `origin` names it in errors.
@@ -166,7 +190,11 @@ fn parse_csv(bytes: &[u8], opts: &ReadOptions, origin: &str) -> Result<Record> {
     let text = std::str::from_utf8(bytes)
         .map_err(|e| fmt_err(origin, format!("not UTF-8 text ({e}); wrong --format?")))?;
     let mut header: Option<Vec<String>> = None;
-    let mut rows: Vec<Vec<f64>> = Vec::new();
+    // All numbers row after row, `width` per row: 8 bytes a number in one allocation, not a
+    // `Vec` per row (a heap block plus a 24-byte header for every line, many times the 2 bytes
+    // of a one-column line; see docs/reliability/fuzzing.md).
+    let mut cells: Vec<f64> = Vec::new();
+    let mut n_rows = 0usize;
     let mut width = 0usize;
     for (lineno, raw) in text.lines().enumerate() {
         let line = raw.trim().trim_start_matches('\u{feff}');
@@ -174,8 +202,13 @@ fn parse_csv(bytes: &[u8], opts: &ReadOptions, origin: &str) -> Result<Record> {
             continue;
         }
         let fields = split_fields(line);
+        if fields.is_empty() {
+            // Nothing but quotes and spaces (`"`): no field, like a blank line. Taken as a row
+            // of width 0 it let the next line set the width, and indexing it panicked.
+            continue;
+        }
         let nums: Vec<Option<f64>> = fields.iter().map(|f| parse_number(f)).collect();
-        if rows.is_empty() && header.is_none() && nums.iter().any(|v| v.is_none()) {
+        if n_rows == 0 && header.is_none() && nums.iter().any(|v| v.is_none()) {
             header = Some(fields.iter().map(|s| s.to_string()).collect());
             width = fields.len();
             continue;
@@ -193,10 +226,9 @@ fn parse_csv(bytes: &[u8], opts: &ReadOptions, origin: &str) -> Result<Record> {
                 ),
             ));
         }
-        let mut row = Vec::with_capacity(width);
         for (f, v) in fields.iter().zip(nums) {
             match v {
-                Some(v) => row.push(v),
+                Some(v) => cells.push(v),
                 None => {
                     return Err(fmt_err(
                         origin,
@@ -205,9 +237,9 @@ fn parse_csv(bytes: &[u8], opts: &ReadOptions, origin: &str) -> Result<Record> {
                 }
             }
         }
-        rows.push(row);
+        n_rows += 1;
     }
-    if rows.is_empty() {
+    if n_rows == 0 {
         return Err(fmt_err(origin, "no numeric rows (empty file?)"));
     }
     let names = header.clone().unwrap_or_default();
@@ -258,14 +290,15 @@ fn parse_csv(bytes: &[u8], opts: &ReadOptions, origin: &str) -> Result<Record> {
             }
         },
     };
-    let samples: Vec<f64> = rows.iter().map(|r| r[value_col]).collect();
+    let at = |k: usize, c: usize| cells[k * width + c];
+    let samples: Vec<f64> = (0..n_rows).map(|k| at(k, value_col)).collect();
     let sample_rate = match opts.sample_rate {
         Some(fs) => fs,
         None => match time_col.filter(|&t| t != value_col) {
-            Some(t) if rows.len() >= 2 => {
-                let t0 = rows[0][t];
-                let t1 = rows[rows.len() - 1][t];
-                let dt = (t1 - t0) / (rows.len() - 1) as f64;
+            Some(t) if n_rows >= 2 => {
+                let t0 = at(0, t);
+                let t1 = at(n_rows - 1, t);
+                let dt = (t1 - t0) / (n_rows - 1) as f64;
                 if !(dt.is_finite() && dt > 0.0) {
                     return Err(fmt_err(
                         origin,
@@ -275,19 +308,30 @@ fn parse_csv(bytes: &[u8], opts: &ReadOptions, origin: &str) -> Result<Record> {
                     ));
                 }
                 // Uniform sampling check: every step within 1 % of the mean step.
-                if let Some(k) = (1..rows.len())
-                    .find(|&k| ((rows[k][t] - rows[k - 1][t]) - dt).abs() > 0.01 * dt)
+                if let Some(k) =
+                    (1..n_rows).find(|&k| ((at(k, t) - at(k - 1, t)) - dt).abs() > 0.01 * dt)
                 {
                     return Err(fmt_err(
                         origin,
                         format!(
                             "non-uniform time column at row {k}: step {} vs mean {dt}; \
                              resample or give --sample-rate",
-                            rows[k][t] - rows[k - 1][t]
+                            at(k, t) - at(k - 1, t)
                         ),
                     ));
                 }
-                1.0 / dt
+                // A step below 1/f64::MAX (e.g. 5e-324 s) is positive but has no finite rate.
+                let rate = 1.0 / dt;
+                if !rate.is_finite() {
+                    return Err(fmt_err(
+                        origin,
+                        format!(
+                            "the time column's step {dt} s gives no finite sample rate; \
+                             give --sample-rate"
+                        ),
+                    ));
+                }
+                rate
             }
             _ => {
                 return Err(fmt_err(
@@ -540,5 +584,77 @@ mod tests {
             assert!(parse_record(&w[..w.len() - 3], Format::Wav, &opts(None, None), "t").is_err());
             assert!(parse_record(&w[..30], Format::Wav, &opts(None, None), "t").is_err());
         }
+    }
+
+    /// A gzip member of `n` zero bytes (compresses about 1000:1).
+    fn gz_zeros(n: usize) -> Vec<u8> {
+        use flate2::{Compression, write::GzEncoder};
+        use std::io::Write;
+        let mut enc = GzEncoder::new(Vec::new(), Compression::best());
+        enc.write_all(&vec![0u8; n]).unwrap();
+        enc.finish().unwrap()
+    }
+
+    #[test]
+    fn gunzip_refuses_a_stream_beyond_its_limit() {
+        let gz = gz_zeros(10_000);
+        assert_eq!(gunzip(&gz, "t.gz", 10_000).unwrap().len(), 10_000);
+        let e = gunzip(&gz, "t.gz", 9_999).unwrap_err().to_string();
+        assert!(e.contains("expands beyond 9999 bytes"), "{e}");
+        // Concatenated members count together.
+        let two = [gz.clone(), gz].concat();
+        assert_eq!(gunzip(&two, "t.gz", 20_000).unwrap().len(), 20_000);
+        assert!(gunzip(&two, "t.gz", 19_999).is_err());
+        assert!(gunzip(b"not gzip", "t.gz", 100).is_err());
+    }
+
+    /// A gzip bomb: 257 concatenated 1 MiB members of zeros (about 260 KB on disk) expand to
+    /// 257 MiB, past `MAX_DECOMPRESSED_BYTES`; `read_record` refuses it instead of
+    /// decompressing without bound (before the cap it read the whole stream into memory).
+    #[test]
+    fn read_record_refuses_a_gzip_bomb() {
+        let member = gz_zeros(1 << 20);
+        let n = MAX_DECOMPRESSED_BYTES / (1 << 20) + 1;
+        let bomb: Vec<u8> = member
+            .iter()
+            .copied()
+            .cycle()
+            .take(member.len() * n)
+            .collect();
+        assert!(bomb.len() < 1 << 20, "the bomb is small on disk");
+        let dir = std::env::temp_dir().join(format!("gearwear-bomb-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("bomb.csv.gz");
+        std::fs::write(&path, &bomb).unwrap();
+        let r = read_record(&path, &opts(Some(1.0), None));
+        std::fs::remove_dir_all(&dir).ok();
+        match r {
+            Err(Error::RecordFormat { reason, .. }) => {
+                assert!(
+                    reason.contains("expands beyond 268435456 bytes"),
+                    "{reason}"
+                )
+            }
+            other => panic!("a gzip bomb was not refused: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn csv_time_step_without_a_finite_rate_is_refused() {
+        // Found by review for the fuzz harness's rate invariant: 1/5e-324 = inf.
+        let e = parse_record(b"t,v\n0,1\n5e-324,2\n", Format::Csv, &opts(None, None), "t")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("no finite sample rate"), "{e}");
+    }
+
+    #[test]
+    fn csv_line_of_only_quotes_is_skipped() {
+        // fuzz/regressions/csv/quote-only-line-then-number.csv, found by `cargo fuzz run csv`:
+        // the line `"` has no field; it became an empty row and `r[value_col]` panicked.
+        let r = parse_record(b"\"\n000.03554\n", Format::Csv, &opts(Some(1.0), None), "t").unwrap();
+        assert_eq!(r.samples, vec![0.03554]);
+        let r = parse_record(b"\"  \"\n1\n2\n", Format::Csv, &opts(Some(1.0), None), "t").unwrap();
+        assert_eq!(r.samples, vec![1.0, 2.0]);
     }
 }

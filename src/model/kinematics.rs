@@ -8,6 +8,11 @@ use serde::Serialize;
 
 use crate::error::{Error, Result};
 
+/// Most planets a configuration may have. Real planetary stages carry 3 to 8; each planet
+/// adds a coordinate and two meshes to the model, so an unchecked count (a config file may say
+/// 4 294 967 295) would make building the model allocate without bound.
+pub const MAX_PLANETS: u32 = 32;
+
 /// Tooth counts of the two fixed-axis stages and the planetary stage.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 pub struct ToothCounts {
@@ -43,7 +48,8 @@ pub struct Frequencies {
 }
 
 impl ToothCounts {
-    /// Validate: no zero teeth, ring larger than sun.
+    /// Validate: no zero teeth, at least one and at most [`MAX_PLANETS`] planets, ring larger
+    /// than sun.
     pub fn validate(&self) -> Result<()> {
         for (name, z) in [
             ("z1", self.z1),
@@ -63,6 +69,13 @@ impl ToothCounts {
                 ));
             }
         }
+        if self.planets > MAX_PLANETS {
+            return Err(Error::param(
+                "planets",
+                self.planets as f64,
+                format!("at most {MAX_PLANETS} planets"),
+            ));
+        }
         if self.zr <= self.zs {
             return Err(Error::param(
                 "zr",
@@ -78,7 +91,8 @@ impl ToothCounts {
         let n1 = 1.0 / self.z1 as f64; // input shaft rate for f1 = 1
         let nb = n1 * self.z1 as f64 / self.z2 as f64;
         let nc_sun = nb * self.z3 as f64 / self.z4 as f64;
-        let carrier = nc_sun * self.zs as f64 / (self.zs + self.zr) as f64;
+        // In f64: `zs + zr` overflows u32 for tooth counts near u32::MAX.
+        let carrier = nc_sun * self.zs as f64 / (self.zs as f64 + self.zr as f64);
         let f2 = self.z3 as f64 * nb;
         let f3 = self.zs as f64 * (nc_sun - carrier);
         Frequencies {
@@ -148,5 +162,33 @@ mod tests {
         let mut z = rig();
         z.zp = 0;
         assert!(z.validate().is_err());
+    }
+
+    #[test]
+    fn rejects_more_planets_than_the_cap() {
+        // fuzz/regressions/model_config/planets-4e9.toml: building Model A with 4e9 planets
+        // allocated a coordinate and two meshes per planet.
+        let mut tc = rig();
+        tc.planets = MAX_PLANETS;
+        assert!(tc.validate().is_ok());
+        tc.planets = MAX_PLANETS + 1;
+        assert!(tc.validate().is_err());
+        tc.planets = 4_000_000_000;
+        assert!(tc.validate().is_err());
+    }
+
+    #[test]
+    fn huge_tooth_counts_do_not_overflow() {
+        // fuzz/regressions/model_config/sun-ring-teeth-overflow.toml: `zs + zr` in u32
+        // overflowed (a panic with overflow checks, a wrapped carrier rate without).
+        let tc = ToothCounts {
+            zs: u32::MAX - 1,
+            zr: u32::MAX,
+            ..rig()
+        };
+        assert!(tc.validate().is_ok());
+        let f = tc.frequencies();
+        assert!((f.carrier / f.shaft_c - 0.5).abs() < 1e-9, "{f:?}");
+        assert!(f.f3.is_finite() && f.f3 > 0.0);
     }
 }

@@ -274,6 +274,21 @@ impl ModelBConfig {
                 ));
             }
         }
+        // Each value above can be finite while the speeds they make are not (radii of 1e-300
+        // and 1e308 mm give an infinite ratio, so zero mesh periods).
+        let w1 = self.mesh1_rad_s();
+        for (name, w) in [
+            ("stage-1 mesh frequency", w1),
+            ("stage-2 mesh frequency", w1 * self.mesh2_ratio()),
+        ] {
+            if !(w.is_finite() && w > 0.0) {
+                return Err(Error::param(
+                    name,
+                    w,
+                    "must be positive and finite: check the base radii and output_speed_rad_s",
+                ));
+            }
+        }
         Ok(())
     }
 

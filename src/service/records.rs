@@ -420,6 +420,15 @@ pub fn decode(
         )
         .with("index", index as u64));
     }
+    // The binary formats check the rate in `parse_record`; a JSON body's is checked here, so
+    // that every decoded record has one (same problem as the diagnosis would give, earlier).
+    if !(fs.is_finite() && fs > 0.0) {
+        return Err(problem_from_error(&crate::Error::param(
+            "sample rate",
+            fs,
+            "must be a positive number of samples per second",
+        )));
+    }
 
     Ok(Decoded {
         samples,

@@ -1,0 +1,336 @@
+//! Fuzz harnesses: one function per input format, each taking arbitrary bytes.
+//!
+//! The `cargo fuzz` targets under `fuzz/` call these, and so does `tests/fuzz_corpus.rs`, which
+//! replays every committed corpus and regression file: one harness, two drivers. Each function
+//! runs the bytes through the same functions the service handler and the CLI run (not a copy)
+//! and then checks invariants. A violated invariant panics on purpose, which is what the fuzzer
+//! reports as a crash; a parser that panics by itself is a crash too. See
+//! `docs/reliability/fuzzing.md`.
+
+use crate::configuration::{Limits, Settings};
+use crate::model::rig_a::{ModelAConfig, Wear};
+use crate::model::rig_b::{ModelBConfig, ModelBOptions};
+use crate::record::{
+    Column, Format, MAX_DECOMPRESSED_BYTES, ReadOptions, Record, gunzip, parse_record,
+};
+use crate::service::error::ApiError;
+use crate::service::records::{BodyFormat, Decoded, decode, parse_query};
+
+/// Sample rate the harnesses pass where a format needs one (Hz).
+const FS: f64 = 25_600.0;
+
+/// The service's default request limits (what `gearwear serve` runs with).
+fn limits() -> Limits {
+    Settings::default().limits
+}
+
+/// A decode error must be the client's fault (4xx), never a 500.
+pub fn check_problem(e: &ApiError, what: &str) {
+    assert!(
+        e.status.is_client_error(),
+        "{what}: decode answered {} ({}): {}",
+        e.status,
+        e.slug,
+        e.detail
+    );
+}
+
+/// What the service's `decode` returns must be a record the diagnosis may be handed.
+pub fn check_decoded(d: &Decoded, limits: &Limits, body_len: usize, what: &str) {
+    assert!(!d.samples.is_empty(), "{what}: empty record accepted");
+    assert!(
+        d.samples.len() <= limits.max_samples,
+        "{what}: {} samples accepted, limit {}",
+        d.samples.len(),
+        limits.max_samples
+    );
+    assert!(
+        body_len <= limits.max_body_bytes,
+        "{what}: body of {body_len} bytes accepted, limit {}",
+        limits.max_body_bytes
+    );
+    assert!(
+        d.samples.iter().all(|v| v.is_finite()),
+        "{what}: non-finite sample accepted"
+    );
+    assert!(
+        d.sample_rate_hz.is_finite() && d.sample_rate_hz > 0.0,
+        "{what}: sample rate {} accepted",
+        d.sample_rate_hz
+    );
+    if let Some(s) = d.shaft_hz {
+        assert!(s.is_finite(), "{what}: shaft_hz {s} accepted");
+    }
+    if let Some(s) = &d.sensor {
+        assert!(
+            s.len() <= 200,
+            "{what}: sensor of {} bytes accepted",
+            s.len()
+        );
+    }
+    if let Some(t) = &d.recorded_at {
+        assert!(
+            crate::service::time::parse_rfc3339(t).is_some(),
+            "{what}: recorded_at `{t}` accepted"
+        );
+    }
+}
+
+/// What `parse_record` returns: non-empty, finite samples, a positive finite rate (the one
+/// given if one was given), and never more samples than `max_samples` (a bound from the input
+/// size: the parser must not invent samples).
+pub fn check_record(r: &Record, opts: &ReadOptions, max_samples: usize, what: &str) {
+    assert!(!r.samples.is_empty(), "{what}: empty record accepted");
+    assert!(
+        r.samples.iter().all(|v| v.is_finite()),
+        "{what}: non-finite sample accepted"
+    );
+    assert!(
+        r.sample_rate.is_finite() && r.sample_rate > 0.0,
+        "{what}: sample rate {} returned",
+        r.sample_rate
+    );
+    if let Some(fs) = opts.sample_rate {
+        assert_eq!(
+            r.sample_rate, fs,
+            "{what}: the given sample rate was not used"
+        );
+    }
+    assert!(
+        r.samples.len() <= max_samples,
+        "{what}: {} samples from an input that can hold at most {max_samples}",
+        r.samples.len()
+    );
+}
+
+fn opts(format: Format, sample_rate: Option<f64>, column: Option<Column>) -> ReadOptions {
+    ReadOptions {
+        format: Some(format),
+        sample_rate,
+        column,
+    }
+}
+
+/// The service's decode of a non-JSON body, with and without `?sample_rate_hz=`.
+fn service_binary(format: BodyFormat, data: &[u8]) {
+    let limits = limits();
+    if data.len() > limits.max_body_bytes {
+        return; // `read_body` answers 413 before decoding.
+    }
+    for query in [None, Some("sample_rate_hz=25600")] {
+        let q = parse_query(query).expect("a fixed valid query");
+        let what = format!("service {format:?} {query:?}");
+        match decode(format, &q, data, &limits) {
+            Ok(d) => {
+                check_decoded(&d, &limits, data.len(), &what);
+                if query.is_some() {
+                    assert_eq!(d.sample_rate_hz, FS, "{what}: query rate not used");
+                }
+            }
+            Err(e) => check_problem(&e, &what),
+        }
+    }
+}
+
+/// `POST /v1/machines/{id}/records` with `Content-Type: application/json`: the handler's
+/// `decode` with the service's default limits. Checks: a 4xx problem or a record within the
+/// limits with finite samples and a positive finite rate; a JSON sample takes at least two
+/// bytes (`0,`), so never more than `len/2` samples.
+pub fn json_body(data: &[u8]) {
+    let limits = limits();
+    if data.len() > limits.max_body_bytes {
+        return;
+    }
+    for query in [None, Some("shaft_hz=30&sensor=fuzz")] {
+        let q = parse_query(query).expect("a fixed valid query");
+        let what = format!("json {query:?}");
+        match decode(BodyFormat::Json, &q, data, &limits) {
+            Ok(d) => {
+                check_decoded(&d, &limits, data.len(), &what);
+                assert!(
+                    d.samples.len() <= data.len() / 2,
+                    "{what}: {} samples from {} bytes",
+                    d.samples.len(),
+                    data.len()
+                );
+            }
+            Err(e) => check_problem(&e, &what),
+        }
+    }
+}
+
+/// CSV as the service (`text/csv`) and the CLI (`--format csv`, several `--column` /
+/// `--sample-rate` choices) read it. Checks [`check_record`]; a CSV row is at least one
+/// byte and a line end, so never more samples than lines.
+pub fn csv(data: &[u8]) {
+    service_binary(BodyFormat::Csv, data);
+    csv_cli(data, "csv");
+}
+
+fn csv_cli(data: &[u8], what: &str) {
+    let lines = data.split(|&b| b == b'\n' || b == b'\r').count();
+    for (fs, col) in [
+        (None, None),
+        (Some(FS), None),
+        (None, Some(Column::Index(0))),
+        (Some(FS), Some(Column::Index(2))),
+        (None, Some(Column::Name("value".into()))),
+    ] {
+        let o = opts(Format::Csv, fs, col);
+        if let Ok(r) = parse_record(data, Format::Csv, &o, "fuzz") {
+            check_record(&r, &o, lines, &format!("{what} {o:?}"));
+        }
+    }
+}
+
+/// A `.gz` record as `read_record` reads it: [`gunzip`] with the CLI's limit, then the CSV
+/// parser. Checks: the output never exceeds the limit; a small limit refuses exactly the
+/// streams that expand beyond it and otherwise yields the same bytes.
+pub fn csv_gz(data: &[u8]) {
+    const SMALL: usize = 4096;
+    let full = gunzip(data, "fuzz.csv.gz", MAX_DECOMPRESSED_BYTES);
+    let small = gunzip(data, "fuzz.csv.gz", SMALL);
+    match (&full, &small) {
+        (Ok(f), Ok(s)) => {
+            assert!(
+                s.len() <= SMALL,
+                "gunzip returned {} > {SMALL} bytes",
+                s.len()
+            );
+            assert_eq!(f, s, "the limit changed the decompressed bytes");
+        }
+        (Ok(f), Err(_)) => assert!(
+            f.len() > SMALL,
+            "a {}-byte stream was refused by the {SMALL}-byte limit",
+            f.len()
+        ),
+        (Err(_), Ok(s)) => panic!("a {}-byte stream passed only the smaller limit", s.len()),
+        (Err(_), Err(_)) => {}
+    }
+    if let Ok(text) = full {
+        assert!(text.len() <= MAX_DECOMPRESSED_BYTES);
+        csv_cli(&text, "csv.gz");
+    }
+}
+
+/// Raw little-endian `f32` as the service (`application/octet-stream`) and the CLI read it.
+/// Checks: accepted exactly when the length is a positive multiple of 4, every value is finite
+/// and a rate is given; then `len/4` samples equal to the input's values.
+pub fn f32_raw(data: &[u8]) {
+    service_binary(BodyFormat::F32, data);
+    let values: Vec<f32> = data
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect();
+    let valid =
+        !data.is_empty() && data.len().is_multiple_of(4) && values.iter().all(|v| v.is_finite());
+    let o = opts(Format::F32, Some(FS), None);
+    match parse_record(data, Format::F32, &o, "fuzz") {
+        Ok(r) => {
+            assert!(valid, "invalid f32 input accepted");
+            check_record(&r, &o, data.len() / 4, "f32");
+            assert_eq!(r.samples.len(), data.len() / 4, "f32: wrong sample count");
+            for (a, b) in r.samples.iter().zip(&values) {
+                assert_eq!(a.to_bits(), (*b as f64).to_bits(), "f32: value changed");
+            }
+        }
+        Err(e) => assert!(!valid, "valid f32 input refused: {e}"),
+    }
+    let o = opts(Format::F32, None, None);
+    assert!(
+        parse_record(data, Format::F32, &o, "fuzz").is_err(),
+        "raw f32 without a sample rate accepted"
+    );
+}
+
+/// RIFF/WAVE as the service (`audio/wav`) and the CLI read it (channel 0 by default, channel
+/// 1, a given sample rate). Checks [`check_record`]; every sample takes at least one byte of
+/// the input, so never more samples than bytes (a header that claims a huge data size must not
+/// create them); channel 0 given explicitly equals the default.
+pub fn wav(data: &[u8]) {
+    service_binary(BodyFormat::Wav, data);
+    let mut default = None;
+    for (fs, col) in [
+        (None, None),
+        (None, Some(Column::Index(0))),
+        (None, Some(Column::Index(1))),
+        (Some(8000.0), None),
+    ] {
+        let o = opts(Format::Wav, fs, col.clone());
+        let r = parse_record(data, Format::Wav, &o, "fuzz");
+        if let Ok(r) = &r {
+            check_record(r, &o, data.len(), &format!("wav {o:?}"));
+        }
+        match (fs, &col) {
+            (None, None) => default = Some(r.ok()),
+            (None, Some(Column::Index(0))) => assert_eq!(
+                default.take().flatten(),
+                r.ok(),
+                "wav: channel 0 differs from the default channel"
+            ),
+            _ => {}
+        }
+    }
+}
+
+/// The model configuration files (`configs/model_a.toml`, `configs/model_b.toml`, or
+/// `--config FILE`): parse as both models and, when that succeeds, build and resolve the
+/// assembly, as `simulate`/`sweep`/`model-b` do before integrating. Checks: no panic, and a
+/// configuration that loads has positive tooth counts, finite kinematic frequencies and (if it
+/// resolves) a finite positive reference frequency.
+pub fn model_config(data: &[u8]) {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return; // `from_file` reads with `read_to_string`, which refuses non-UTF-8.
+    };
+    if let Ok(cfg) = ModelAConfig::from_toml(text, "fuzz.toml") {
+        let tc = cfg.tooth_counts();
+        assert!(
+            tc.validate().is_ok(),
+            "model A: invalid tooth counts loaded"
+        );
+        let fr = cfg.tooth_counts().frequencies();
+        assert!(
+            fr.f2.is_finite() && fr.f3.is_finite(),
+            "model A: non-finite mesh frequency ratios {fr:?}"
+        );
+        if let Ok(asm) = cfg.assembly(Wear::fixed_axis(0.5))
+            && let Ok(m) = asm.resolve()
+        {
+            assert!(
+                m.omega_h.is_finite() && m.omega_h > 0.0,
+                "model A: omega_h {}",
+                m.omega_h
+            );
+        }
+    }
+    if let Ok(cfg) = ModelBConfig::from_toml(text, "fuzz.toml") {
+        let (p1, p2) = cfg.mesh_periods_s();
+        assert!(
+            p1 > 0.0 && p2 > 0.0,
+            "model B: mesh periods {p1}, {p2} from a loaded config"
+        );
+        if let Ok(asm) = cfg.assembly(&ModelBOptions::default())
+            && let Ok(m) = asm.resolve()
+        {
+            assert!(
+                m.omega_h.is_finite() && m.omega_h > 0.0,
+                "model B: omega_h {}",
+                m.omega_h
+            );
+        }
+    }
+}
+
+/// A harness: arbitrary bytes in, a panic on a crash or a broken invariant.
+pub type Harness = fn(&[u8]);
+
+/// The harnesses by target name (the names of `fuzz/fuzz_targets/*.rs` and of the
+/// `fuzz/seeds/<target>/`, `fuzz/corpus/<target>/` and `fuzz/regressions/<target>/` folders).
+pub const TARGETS: [(&str, Harness); 6] = [
+    ("json_body", json_body),
+    ("csv", csv),
+    ("csv_gz", csv_gz),
+    ("f32_raw", f32_raw),
+    ("wav", wav),
+    ("model_config", model_config),
+];
