@@ -129,8 +129,8 @@ impl From<StoreError> for ApiError {
                 StatusCode::SERVICE_UNAVAILABLE,
                 "store-unavailable",
                 "The database is unavailable",
-                "the service cannot reach its database right now; nothing was stored — retry \
-                 the same request (with the same Idempotency-Key) later",
+                "the service cannot reach its database right now; retry the same request \
+                 later — a record re-sent with the same Idempotency-Key is stored at most once",
             )
             .retry_after(5)
         } else {

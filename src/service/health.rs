@@ -1,5 +1,7 @@
 //! `/healthz` (the process answers), `/readyz` (table loaded, store reachable), `/metrics`.
 
+use std::time::Duration;
+
 use axum::Json;
 use axum::extract::State;
 use axum::http::{HeaderValue, StatusCode, header};
@@ -12,8 +14,23 @@ pub async fn healthz() -> Response {
     Json(json!({"status": "ok"})).into_response()
 }
 
+/// The longest `/readyz` waits for the store's answer. Without a bound it would wait for the
+/// pool's acquire timeout (5 s on PostgreSQL) while the database is unreachable — longer
+/// than a readiness probe's own timeout usually is.
+pub const READY_STORE_TIMEOUT: Duration = Duration::from_secs(2);
+
 pub async fn readyz(State(app): State<AppState>) -> Response {
-    let store_ok = app.store.ping().await.is_ok();
+    let store_ok = match tokio::time::timeout(READY_STORE_TIMEOUT, app.store.ping()).await {
+        Ok(Ok(())) => true,
+        Ok(Err(e)) => {
+            tracing::debug!(error = %e, "readyz: store unavailable");
+            false
+        }
+        Err(_) => {
+            tracing::debug!("readyz: the store did not answer within {READY_STORE_TIMEOUT:?}");
+            false
+        }
+    };
     let table = app.diagnoser.table_id();
     let ready = store_ok && !table.is_empty();
     let body = json!({

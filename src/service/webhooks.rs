@@ -161,6 +161,22 @@ pub fn backoff(base: Duration, max: Duration, attempt: i64) -> Duration {
     base.mul_f64(f).min(max)
 }
 
+/// An error with its causes (`reqwest` alone says "error sending request for url (…)"; the
+/// cause — connection refused, timed out, DNS — is in the source chain).
+fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut s = e.to_string();
+    let mut cause = e.source();
+    while let Some(c) = cause {
+        let c_text = c.to_string();
+        if !s.contains(&c_text) {
+            s.push_str(": ");
+            s.push_str(&c_text);
+        }
+        cause = c.source();
+    }
+    s
+}
+
 /// The delivery worker: runs until `stop` turns true.
 pub async fn worker(app: AppState, mut stop: watch::Receiver<bool>) {
     let ws = app.settings.webhooks.clone();
@@ -212,7 +228,7 @@ async fn deliver(app: &AppState, d: &DeliveryRow, w: &WebhookRow) {
     let attempt = d.attempts + 1;
     let (code, error) = match &res {
         Ok(r) => (Some(r.status().as_u16() as i64), None),
-        Err(e) => (None, Some(e.to_string())),
+        Err(e) => (None, Some(error_chain(e))),
     };
     let ok = code.is_some_and(|c| (200..300).contains(&c));
     let now = now_ms();

@@ -43,22 +43,36 @@ pub enum StoreError {
 }
 
 impl StoreError {
-    /// Is this the database being unreachable (→ 503 + Retry-After) rather than a bug?
+    /// Is this the database being unreachable or too busy to answer (→ 503 + Retry-After)
+    /// rather than a bug (→ 500)?
+    ///
+    /// * the connection: pool timed out or closed, I/O, TLS, protocol, worker gone;
+    /// * SQLite: `SQLITE_BUSY` / `SQLITE_LOCKED` with any extended code (sqlx reports the
+    ///   extended one, e.g. 517 `SQLITE_BUSY_SNAPSHOT`, so the primary code is `code & 0xff`);
+    /// * PostgreSQL: class 08 (connection exception), 57P01 `admin_shutdown`, 57P02
+    ///   `crash_shutdown`, 57P03 `cannot_connect_now`, 53300 `too_many_connections`.
     pub fn is_unavailable(&self) -> bool {
-        if let StoreError::Shared(e) = self {
-            return e.is_unavailable();
-        }
-        matches!(
-            self,
+        match self {
+            StoreError::Shared(e) => e.is_unavailable(),
             StoreError::Db(
                 sqlx::Error::PoolTimedOut
-                    | sqlx::Error::PoolClosed
-                    | sqlx::Error::Io(_)
-                    | sqlx::Error::Tls(_)
-                    | sqlx::Error::Protocol(_)
-                    | sqlx::Error::WorkerCrashed
-            )
-        ) || matches!(self, StoreError::Db(sqlx::Error::Database(e)) if e.code().as_deref() == Some("5") || e.code().as_deref() == Some("57P01"))
+                | sqlx::Error::PoolClosed
+                | sqlx::Error::Io(_)
+                | sqlx::Error::Tls(_)
+                | sqlx::Error::Protocol(_)
+                | sqlx::Error::WorkerCrashed,
+            ) => true,
+            StoreError::Db(sqlx::Error::Database(e)) => {
+                let code = e.code().unwrap_or_default();
+                if e.try_downcast_ref::<sqlx::sqlite::SqliteError>().is_some() {
+                    code.parse::<i32>().is_ok_and(|c| matches!(c & 0xff, 5 | 6))
+                } else {
+                    code.starts_with("08")
+                        || matches!(&*code, "57P01" | "57P02" | "57P03" | "53300")
+                }
+            }
+            _ => false,
+        }
     }
 }
 

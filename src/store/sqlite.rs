@@ -31,3 +31,83 @@ impl SqliteStore {
 }
 
 super::impl_store!(SqliteStore, sqlx::Sqlite, "sqlite");
+
+#[cfg(test)]
+mod tests {
+    use std::str::FromStr;
+    use std::time::Duration;
+
+    use sqlx::Connection;
+    use sqlx::sqlite::{SqliteConnectOptions, SqliteConnection, SqliteJournalMode};
+
+    use crate::store::StoreError;
+
+    fn code(e: &sqlx::Error) -> String {
+        match e {
+            sqlx::Error::Database(d) => d.code().unwrap_or_default().into_owned(),
+            other => panic!("not a database error: {other}"),
+        }
+    }
+
+    /// A busy SQLite file is "unavailable" (503, retry) whatever extended code SQLite gives:
+    /// sqlx reports the extended code, so matching the primary code `"5"` alone let
+    /// `SQLITE_BUSY_SNAPSHOT` (517) through as a 500.
+    #[tokio::test]
+    async fn busy_sqlite_is_unavailable_whatever_its_extended_code() {
+        let dir = std::env::temp_dir().join(format!("gearwear-busy-{}", uuid::Uuid::new_v4()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let opts = SqliteConnectOptions::from_str("sqlite://")
+            .unwrap()
+            .filename(dir.join("busy.db"))
+            .create_if_missing(true)
+            .journal_mode(SqliteJournalMode::Wal)
+            .busy_timeout(Duration::ZERO);
+        let mut a = SqliteConnection::connect_with(&opts).await.unwrap();
+        let mut b = SqliteConnection::connect_with(&opts).await.unwrap();
+        for q in [
+            "CREATE TABLE t (x INTEGER PRIMARY KEY)",
+            "INSERT INTO t VALUES (1)",
+        ] {
+            sqlx::query(q).execute(&mut a).await.unwrap();
+        }
+        // A read transaction whose snapshot another connection's commit made stale cannot
+        // become a writer: SQLITE_BUSY_SNAPSHOT.
+        sqlx::query("BEGIN").execute(&mut a).await.unwrap();
+        sqlx::query("SELECT * FROM t")
+            .fetch_all(&mut a)
+            .await
+            .unwrap();
+        sqlx::query("INSERT INTO t VALUES (2)")
+            .execute(&mut b)
+            .await
+            .unwrap();
+        let e = sqlx::query("INSERT INTO t VALUES (3)")
+            .execute(&mut a)
+            .await
+            .unwrap_err();
+        assert_eq!(code(&e), "517");
+        assert!(StoreError::Db(e).is_unavailable());
+        sqlx::query("ROLLBACK").execute(&mut a).await.unwrap();
+        // Another connection holds the write lock: SQLITE_BUSY.
+        sqlx::query("BEGIN IMMEDIATE")
+            .execute(&mut b)
+            .await
+            .unwrap();
+        let e = sqlx::query("INSERT INTO t VALUES (4)")
+            .execute(&mut a)
+            .await
+            .unwrap_err();
+        assert_eq!(code(&e), "5");
+        assert!(StoreError::Db(e).is_unavailable());
+        sqlx::query("ROLLBACK").execute(&mut b).await.unwrap();
+        // A bug is not: a primary-key violation (SQLITE_CONSTRAINT_PRIMARYKEY, 1555).
+        let e = sqlx::query("INSERT INTO t VALUES (1)")
+            .execute(&mut a)
+            .await
+            .unwrap_err();
+        assert_eq!(code(&e), "1555");
+        assert!(!StoreError::Db(e).is_unavailable());
+        drop((a, b));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

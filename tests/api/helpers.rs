@@ -424,3 +424,162 @@ macro_rules! both_stores {
         }
     };
 }
+
+// ---------- A TCP proxy the tests can cut ----------
+
+/// A TCP proxy on a random loopback port in front of `upstream` (PostgreSQL), for outage
+/// tests that must not stop the shared database: [`CutProxy::cut`] closes every proxied
+/// connection and refuses new ones (the listener is gone: connection refused, as when the
+/// database is stopped); [`CutProxy::restore`] listens again on the same port.
+/// [`CutProxy::stall`] is a network partition instead: connections stay open (new ones are
+/// accepted) but no byte goes through until [`CutProxy::resume`].
+pub struct CutProxy {
+    pub port: u16,
+    upstream: String,
+    accept: std::sync::Mutex<Option<tokio::task::JoinHandle<()>>>,
+    conns: Arc<std::sync::Mutex<Vec<tokio::task::JoinHandle<()>>>>,
+    stalled: tokio::sync::watch::Sender<bool>,
+}
+
+/// Copy `r` to `w`, holding the bytes while `stalled`.
+async fn pump(
+    mut r: tokio::net::tcp::OwnedReadHalf,
+    mut w: tokio::net::tcp::OwnedWriteHalf,
+    mut stalled: tokio::sync::watch::Receiver<bool>,
+) {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let mut buf = vec![0u8; 16 * 1024];
+    loop {
+        let n = match r.read(&mut buf).await {
+            Ok(0) | Err(_) => return,
+            Ok(n) => n,
+        };
+        if stalled.wait_for(|s| !*s).await.is_err() {
+            return;
+        }
+        if w.write_all(&buf[..n]).await.is_err() {
+            return;
+        }
+    }
+}
+
+impl CutProxy {
+    /// Listen on `127.0.0.1:0`, forwarding to `upstream` (`host:port`).
+    pub async fn start(upstream: &str) -> CutProxy {
+        let l = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let port = l.local_addr().unwrap().port();
+        let p = CutProxy {
+            port,
+            upstream: upstream.to_string(),
+            accept: std::sync::Mutex::new(None),
+            conns: Default::default(),
+            stalled: tokio::sync::watch::channel(false).0,
+        };
+        p.spawn_accept(l);
+        p
+    }
+
+    fn spawn_accept(&self, l: tokio::net::TcpListener) {
+        let upstream = self.upstream.clone();
+        let conns = self.conns.clone();
+        let stalled = self.stalled.clone();
+        let task = tokio::spawn(async move {
+            loop {
+                let Ok((inbound, _)) = l.accept().await else {
+                    continue;
+                };
+                let upstream = upstream.clone();
+                let mut stalled = stalled.subscribe();
+                let c = tokio::spawn(async move {
+                    if stalled.wait_for(|s| !*s).await.is_err() {
+                        return;
+                    }
+                    if let Ok(out) = tokio::net::TcpStream::connect(&upstream).await {
+                        let (ri, wi) = inbound.into_split();
+                        let (ro, wo) = out.into_split();
+                        // Either side closing ends both (dropping the halves closes them).
+                        tokio::select! {
+                            _ = pump(ri, wo, stalled.clone()) => {}
+                            _ = pump(ro, wi, stalled) => {}
+                        }
+                    }
+                });
+                let mut v = conns.lock().unwrap();
+                v.retain(|t| !t.is_finished());
+                v.push(c);
+            }
+        });
+        *self.accept.lock().unwrap() = Some(task);
+    }
+
+    /// The database goes away: close the listener (new connections are refused) and every
+    /// open connection (both ends see the socket close).
+    pub async fn cut(&self) {
+        let accept = self.accept.lock().unwrap().take();
+        if let Some(t) = accept {
+            t.abort();
+            let _ = t.await;
+        }
+        let conns: Vec<_> = std::mem::take(&mut *self.conns.lock().unwrap());
+        for c in conns {
+            c.abort();
+            let _ = c.await;
+        }
+    }
+
+    /// The database is back: listen on the same port again.
+    pub async fn restore(&self) {
+        for _ in 0..100 {
+            if let Ok(l) = tokio::net::TcpListener::bind(("127.0.0.1", self.port)).await {
+                self.spawn_accept(l);
+                return;
+            }
+            tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+        }
+        panic!("could not listen on 127.0.0.1:{} again", self.port);
+    }
+
+    /// A partition: every connection, open or new, stops passing bytes (nothing is closed).
+    pub fn stall(&self) {
+        self.stalled.send_replace(true);
+    }
+
+    /// The partition heals: held bytes go through.
+    pub fn resume(&self) {
+        self.stalled.send_replace(false);
+    }
+
+    /// `url` (`postgres://user@host:port/db`) with its `host:port` replaced by the proxy's.
+    pub fn proxied_url(&self, url: &str) -> String {
+        let (head, hostport, tail) = split_pg_url(url);
+        assert_eq!(
+            hostport, self.upstream,
+            "the proxy forwards to another server"
+        );
+        format!("{head}127.0.0.1:{}{tail}", self.port)
+    }
+}
+
+impl Drop for CutProxy {
+    fn drop(&mut self) {
+        if let Some(t) = self.accept.lock().unwrap().take() {
+            t.abort();
+        }
+        for c in self.conns.lock().unwrap().drain(..) {
+            c.abort();
+        }
+    }
+}
+
+/// `postgres://user@host:port/db?x` → (`postgres://user@`, `host:port`, `/db?x`).
+pub fn split_pg_url(url: &str) -> (&str, &str, &str) {
+    let start = url
+        .find('@')
+        .map(|i| i + 1)
+        .unwrap_or_else(|| url.find("://").unwrap() + 3);
+    let end = url[start..]
+        .find('/')
+        .map(|i| start + i)
+        .unwrap_or(url.len());
+    (&url[..start], &url[start..end], &url[end..])
+}

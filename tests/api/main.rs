@@ -7,6 +7,7 @@ mod api;
 mod browser;
 mod calibration;
 mod cli;
+mod faults;
 mod openapi;
 mod store;
 mod webhooks;
