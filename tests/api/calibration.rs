@@ -61,7 +61,13 @@ fn names(v: &Value) -> Vec<&str> {
 }
 
 async fn calibrate_keep_use_and_clear(b: Backend) {
-    let Some(app) = spawn_app(b, |_| {}).await else {
+    // A calibration runs simulations (seconds of CPU); on a shared, loaded machine it can pass
+    // the service's default 15 s request timeout. The timeout is not under test here.
+    let Some(app) = spawn_app(b, |s| {
+        s.limits.request_timeout = std::time::Duration::from_secs(180)
+    })
+    .await
+    else {
         return;
     };
     let url = app.url("/v1/machines/gb-1/calibration");
