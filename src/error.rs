@@ -69,6 +69,12 @@ pub enum Error {
         percent: f64,
         longest_run: usize,
     },
+    /// The record's format carries no sample rate and none was given.
+    #[error("{format} carries no sample rate: give it (--sample-rate HZ)")]
+    MissingSampleRate {
+        /// What lacks it, e.g. "raw f32 (no header)".
+        format: &'static str,
+    },
     /// A record sample is NaN or ±∞.
     #[error("sample {index} of the record is {value}; the record must contain only finite numbers")]
     NonFiniteSample { index: usize, value: f64 },

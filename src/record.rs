@@ -445,10 +445,9 @@ fn parse_csv(bytes: &[u8], opts: &ReadOptions, origin: &str) -> Result<Record> {
                 rate
             }
             _ => {
-                return Err(fmt_err(
-                    origin,
-                    "no time column: give the sample rate (--sample-rate HZ)",
-                ));
+                return Err(Error::MissingSampleRate {
+                    format: "a CSV without a time column",
+                });
             }
         },
     };
@@ -459,11 +458,8 @@ fn parse_csv(bytes: &[u8], opts: &ReadOptions, origin: &str) -> Result<Record> {
 }
 
 fn parse_f32(bytes: &[u8], opts: &ReadOptions, origin: &str) -> Result<Record> {
-    let fs = opts.sample_rate.ok_or_else(|| {
-        fmt_err(
-            origin,
-            "raw f32 has no header: give the sample rate (--sample-rate HZ)",
-        )
+    let fs = opts.sample_rate.ok_or(Error::MissingSampleRate {
+        format: "raw f32 (no header)",
     })?;
     if !bytes.len().is_multiple_of(4) {
         return Err(fmt_err(

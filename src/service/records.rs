@@ -205,6 +205,11 @@ pub fn problem_from_error(e: &crate::Error) -> ApiError {
             format!("the body could not be read as the stated format: {reason}"),
         ),
         E::EmptyRecord => un("empty-record", "Empty record", e.to_string()),
+        E::MissingSampleRate { .. } => un(
+            "missing-sample-rate",
+            "Sample rate missing",
+            e.to_string(),
+        ),
         E::FlatRecord { samples, .. } => {
             un("flat-record", "Flat record", e.to_string()).with("samples", *samples as u64)
         }
@@ -269,13 +274,6 @@ fn decode_binary(
         BodyFormat::Wav => Format::Wav,
         BodyFormat::Json => unreachable!("JSON is decoded by serde"),
     };
-    if sample_rate.is_none() && format == BodyFormat::F32 {
-        return Err(ApiError::bad_request(
-            "malformed-record",
-            "Malformed record",
-            "raw f32 samples carry no sample rate: add `?sample_rate_hz=…` to the URL",
-        ));
-    }
     let opts = ReadOptions {
         format: Some(f),
         sample_rate,

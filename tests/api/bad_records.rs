@@ -86,6 +86,7 @@ const MALFORMED: (u16, &str, &str) = (400, "malformed-record", "Malformed record
 const BAD_JSON: (u16, &str, &str) = (400, "invalid-json", "Malformed JSON record");
 const BAD_QUERY: (u16, &str, &str) = (400, "invalid-query", "Invalid query parameter");
 const MEDIA: (u16, &str, &str) = (415, "unsupported-media-type", "Unsupported content type");
+const NO_RATE: (u16, &str, &str) = (422, "missing-sample-rate", "Sample rate missing");
 const SLOW_RATE: (u16, &str, &str) = (422, "sample-rate-too-low", "Sample rate too low");
 const BAND: (u16, &str, &str) = (
     422,
@@ -394,16 +395,16 @@ fn cases() -> Vec<Case> {
             "application/octet-stream",
             "",
             f32_body(x),
-            MALFORMED,
-            "add `?sample_rate_hz=…` to the URL",
+            NO_RATE,
+            "raw f32 (no header) carries no sample rate: give it (`?sample_rate_hz=…`)",
         ),
         case(
             "CSV without a sample rate or time column",
             "text/csv",
             "",
             csv_body(x),
-            MALFORMED,
-            "`?sample_rate_hz=…`",
+            NO_RATE,
+            "a CSV without a time column carries no sample rate: give it (`?sample_rate_hz=…`)",
         ),
         case(
             "sample rate below Nyquist for the needed lines",
