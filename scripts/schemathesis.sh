@@ -9,8 +9,8 @@
 #
 #   scripts/schemathesis.sh [--short | --long] [--store sqlite|postgres] [--seconds N]
 #
-# --short (what CI runs): about 3 minutes in all. --long: 20 minutes for the admin run and 5
-# for each of the others (or --seconds N for the admin run). Any failure, and any panic in the
+# --short (what CI runs): about 2 minutes in all (plus the first install). --long: 20 minutes
+# for the admin run and 5 for each of the others (or --seconds N for the admin run). Any failure, and any panic in the
 # server's log, exits non-zero; the schemathesis reports (JUnit + NDJSON) and the server log are
 # kept in target/schemathesis/<run>/.
 #
@@ -33,7 +33,7 @@ while [ $# -gt 0 ]; do
   esac
 done
 if [ "$mode" = short ]; then
-  admin_s=${seconds:-100} other_s=35 examples=40
+  admin_s=${seconds:-60} other_s=20 examples=40
 else
   admin_s=${seconds:-1200} other_s=300 examples=1000
 fi
