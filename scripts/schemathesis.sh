@@ -10,9 +10,9 @@
 #   scripts/schemathesis.sh [--short | --long] [--store sqlite|postgres] [--seconds N]
 #
 # --short (what CI runs): about 2 minutes in all (plus the first install). --long: 20 minutes
-# for the admin run and 5 for each of the others (or --seconds N for the admin run). Any failure, and any panic in the
-# server's log, exits non-zero; the schemathesis reports (JUnit + NDJSON) and the server log are
-# kept in target/schemathesis/<run>/.
+# for the admin run and 5 for each of the others (or --seconds N for the admin run). Any
+# failure, and any panic in the server's log, exits non-zero; the schemathesis reports (JUnit +
+# NDJSON) and the server log are kept in target/schemathesis/<run>/.
 #
 # One worker: with several, CPython 3.11's ast module (used by hypothesis to describe
 # lambdas) can raise a spurious "AST constructor recursion depth mismatch" (cpython#106905).

@@ -205,11 +205,9 @@ pub fn problem_from_error(e: &crate::Error) -> ApiError {
             format!("the body could not be read as the stated format: {reason}"),
         ),
         E::EmptyRecord => un("empty-record", "Empty record", e.to_string()),
-        E::MissingSampleRate { .. } => un(
-            "missing-sample-rate",
-            "Sample rate missing",
-            e.to_string(),
-        ),
+        E::MissingSampleRate { .. } => {
+            un("missing-sample-rate", "Sample rate missing", e.to_string())
+        }
         E::FlatRecord { samples, .. } => {
             un("flat-record", "Flat record", e.to_string()).with("samples", *samples as u64)
         }

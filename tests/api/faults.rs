@@ -1038,7 +1038,9 @@ async fn settle(
             s => panic!("ingest answered {s} during the fault: {a:?}"),
         }
     }
-    let stored_before_resend = count(real_url, "SELECT COUNT(*) FROM records").await;
+    // A request answered 503 by its timeout may still sit in the group-commit queue and be
+    // committed once the database answers again: wait until the count stops moving.
+    let stored_before_resend = stable_count(real_url, "SELECT COUNT(*) FROM records").await;
     let before = created.len();
     let mut replays = 0;
     for (k, seed) in &failed {
@@ -1069,6 +1071,20 @@ async fn settle(
         "one record per idempotency key that got a 201"
     );
     (failed.len(), replays)
+}
+
+/// [`count`] once it reads the same twice, 500 ms apart (at most 30 s).
+async fn stable_count(url: &str, sql: &'static str) -> i64 {
+    let mut last = count(url, sql).await;
+    for _ in 0..60 {
+        tokio::time::sleep(Duration::from_millis(500)).await;
+        let n = count(url, sql).await;
+        if n == last {
+            return n;
+        }
+        last = n;
+    }
+    last
 }
 
 async fn count(url: &str, sql: &'static str) -> i64 {
