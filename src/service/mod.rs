@@ -73,6 +73,8 @@ impl AppState {
             auth::RateLimiter::new(settings.limits.rate_per_second, settings.limits.rate_burst);
         let http = reqwest::Client::builder()
             .redirect(reqwest::redirect::Policy::none())
+            // Webhook hosts given by name must not resolve to metadata/link-local addresses.
+            .dns_resolver(webhooks::GuardedResolver)
             .build()
             .expect("HTTP client");
         let ingest_queue = crate::store::queue::IngestQueue::start(store.clone(), INGEST_BATCH);
