@@ -55,11 +55,19 @@ impl FromRequestParts<AppState> for Caller {
             return Ok(refuse(invalid));
         };
         let Some(row) = state.store.get_key(id).await? else {
+            tracing::debug!(presented_key_id = id, "API key refused: unknown id");
             return Ok(refuse(invalid));
         };
         if row.revoked_at.is_some() || !keys::verify(secret, &row.hash) {
+            tracing::debug!(
+                presented_key_id = id,
+                revoked = row.revoked_at.is_some(),
+                "API key refused: revoked or wrong secret"
+            );
             return Ok(refuse(invalid));
         }
+        // The request's span (mod.rs) carries the key's id from here on.
+        tracing::Span::current().record("key_id", row.id.as_str());
         Ok(Caller {
             key_id: Some(row.id),
             scopes: row.scopes,
