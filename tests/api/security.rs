@@ -467,7 +467,7 @@ async fn keys_are_stored_hashed(b: Backend) {
     let url = app.db.as_ref().unwrap().url.clone();
     // The real command, as an operator runs it.
     let out = gw()
-        .args(["keys", "create", "--scope", "ingest,read", "--label", "hash-test", "--database-url", &url])
+        .args(["keys", "create", "--scope", "ingest,read", "--label", "hash-test", "--database-url", url.as_str()])
         .output()
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
@@ -817,7 +817,7 @@ async fn no_secret_in_the_logs(b: Backend) {
     let revoked = create_key_cli(&db.url, "ingest,read");
     let revoked_id = gearwear::keys::split_token(&revoked).unwrap().0.to_string();
     let out = gw()
-        .args(["keys", "revoke", &revoked_id, "--database-url", &db.url])
+        .args(["keys", "revoke", revoked_id.as_str(), "--database-url", db.url.as_str()])
         .output()
         .unwrap();
     assert!(out.status.success());
@@ -1010,10 +1010,10 @@ async fn webhook_signature_follows_the_documented_recipe(b: Backend) {
     tampered[i] = b'n';
     let later = format!("t={},v1={v1}", t + 1);
     let cases: [(&str, &str, &[u8], bool); 4] = [
-        ("the delivery as received", &secret, &body, true),
-        ("a body changed in one byte", &secret, &tampered, false),
-        ("another webhook's secret", &other, &body, false),
-        ("a changed timestamp", &secret, &body, false),
+        ("the delivery as received", secret.as_str(), &body[..], true),
+        ("a body changed in one byte", secret.as_str(), &tampered[..], false),
+        ("another webhook's secret", other.as_str(), &body[..], false),
+        ("a changed timestamp", secret.as_str(), &body[..], false),
     ];
     let mut python_ran = false;
     for (what, key, payload, want) in cases {
@@ -1074,7 +1074,7 @@ async fn non_loopback_address_needs_an_active_key(b: Backend) {
     assert!(s.terminate().await.success());
     // Only a revoked key left: refused again.
     let id = gearwear::keys::split_token(&key).unwrap().0.to_string();
-    assert!(gw().args(["keys", "revoke", &id, "--database-url", &db.url]).status().unwrap().success());
+    assert!(gw().args(["keys", "revoke", id.as_str(), "--database-url", db.url.as_str()]).status().unwrap().success());
     refused("0.0.0.0:0").await;
 }
 
