@@ -118,28 +118,28 @@ pub struct GuardedResolver;
 
 impl reqwest::dns::Resolve for GuardedResolver {
     fn resolve(&self, name: reqwest::dns::Name) -> reqwest::dns::Resolving {
-        let host = name.as_str().to_string();
-        Box::pin(async move {
-            let all: Vec<std::net::SocketAddr> =
-                tokio::net::lookup_host((host.as_str(), 0)).await?.collect();
-            let ok: Vec<std::net::SocketAddr> = all
-                .iter()
-                .copied()
-                .filter(|a| refused_ip(a.ip()).is_none())
-                .collect();
-            if ok.is_empty()
-                && let Some(first) = all.first()
-            {
-                let why = refused_ip(first.ip()).unwrap_or("refused");
-                return Err(format!(
-                    "`{host}` resolves to {}, {why}; {ALLOWED}",
-                    first.ip()
-                )
-                .into());
-            }
-            Ok(Box::new(ok.into_iter()) as reqwest::dns::Addrs)
-        })
+        Box::pin(resolve_guarded(name.as_str().to_string()))
     }
+}
+
+async fn resolve_guarded(
+    host: String,
+) -> Result<reqwest::dns::Addrs, Box<dyn std::error::Error + Send + Sync>> {
+    let all: Vec<std::net::SocketAddr> = tokio::net::lookup_host((host.as_str(), 0))
+        .await?
+        .collect();
+    let ok: Vec<std::net::SocketAddr> = all
+        .iter()
+        .copied()
+        .filter(|a| refused_ip(a.ip()).is_none())
+        .collect();
+    if ok.is_empty()
+        && let Some(first) = all.first()
+    {
+        let why = refused_ip(first.ip()).unwrap_or("refused");
+        return Err(format!("`{host}` resolves to {}, {why}; {ALLOWED}", first.ip()).into());
+    }
+    Ok(Box::new(ok.into_iter()))
 }
 
 fn webhook_json(w: &WebhookRow) -> Value {
