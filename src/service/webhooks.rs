@@ -93,9 +93,9 @@ pub fn refused_ip(ip: std::net::IpAddr) -> Option<&'static str> {
     match ip {
         IpAddr::V4(a) if a.is_unspecified() => Some("the unspecified address"),
         IpAddr::V4(a) if a.is_broadcast() => Some("the broadcast address"),
-        IpAddr::V4(a) if a.is_link_local() => Some(
-            "a link-local address (169.254.0.0/16, where cloud instance metadata answers)",
-        ),
+        IpAddr::V4(a) if a.is_link_local() => {
+            Some("a link-local address (169.254.0.0/16, where cloud instance metadata answers)")
+        }
         IpAddr::V4(a) if a == Ipv4Addr::new(100, 100, 100, 200) => {
             Some("a cloud instance-metadata address")
         }
@@ -125,9 +125,8 @@ impl reqwest::dns::Resolve for GuardedResolver {
 async fn resolve_guarded(
     host: String,
 ) -> Result<reqwest::dns::Addrs, Box<dyn std::error::Error + Send + Sync>> {
-    let all: Vec<std::net::SocketAddr> = tokio::net::lookup_host((host.as_str(), 0))
-        .await?
-        .collect();
+    let all: Vec<std::net::SocketAddr> =
+        tokio::net::lookup_host((host.as_str(), 0)).await?.collect();
     let ok: Vec<std::net::SocketAddr> = all
         .iter()
         .copied()

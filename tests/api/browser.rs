@@ -298,7 +298,8 @@ async fn dashboard_asks_for_a_read_key() {
         json!(app.read_key)
     );
     assert_eq!(
-        d.script("return localStorage.getItem('gearwear-key')").await,
+        d.script("return localStorage.getItem('gearwear-key')")
+            .await,
         Value::Null
     );
     assert_eq!(
@@ -307,7 +308,8 @@ async fn dashboard_asks_for_a_read_key() {
         json!(true)
     );
     assert_eq!(
-        d.script("return document.getElementById('key').value").await,
+        d.script("return document.getElementById('key').value")
+            .await,
         json!(""),
         "the field does not keep the key"
     );

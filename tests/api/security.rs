@@ -78,10 +78,18 @@ const TABLE: &[(&str, &str, Need)] = &[
         "/v1/machines/{machine_id}/calibration",
         Need::Key(Scope::Admin),
     ),
-    ("GET", "/v1/diagnoses/{diagnosis_id}", Need::Key(Scope::Read)),
+    (
+        "GET",
+        "/v1/diagnoses/{diagnosis_id}",
+        Need::Key(Scope::Read),
+    ),
     ("POST", "/v1/webhooks", Need::Key(Scope::Admin)),
     ("GET", "/v1/webhooks", Need::Key(Scope::Admin)),
-    ("DELETE", "/v1/webhooks/{webhook_id}", Need::Key(Scope::Admin)),
+    (
+        "DELETE",
+        "/v1/webhooks/{webhook_id}",
+        Need::Key(Scope::Admin),
+    ),
     (
         "GET",
         "/v1/webhooks/{webhook_id}/deliveries",
@@ -180,7 +188,13 @@ impl Fixture {
 
 /// A request for a route. `full`: a body the route would act on (a real record for a
 /// calibration, so a refusal that let it through would be seen); otherwise a cheap one.
-fn request(app: &TestApp, method: &str, template: &str, path: &str, full: bool) -> reqwest::RequestBuilder {
+fn request(
+    app: &TestApp,
+    method: &str,
+    template: &str,
+    path: &str,
+    full: bool,
+) -> reqwest::RequestBuilder {
     let url = app.url(path);
     match (method, template) {
         ("POST", "/v1/machines/{machine_id}/records") => app.client.post(url).json(&json_record(3)),
@@ -194,9 +208,10 @@ fn request(app: &TestApp, method: &str, template: &str, path: &str, full: bool) 
                     .json(&json!({"sample_rate_hz": 25600, "samples": []}))
             }
         }
-        ("POST", "/v1/webhooks") => app.client.post(url).json(
-            &json!({"url": "http://127.0.0.1:9/matrix", "events": ["diagnosis.created"]}),
-        ),
+        ("POST", "/v1/webhooks") => app
+            .client
+            .post(url)
+            .json(&json!({"url": "http://127.0.0.1:9/matrix", "events": ["diagnosis.created"]})),
         ("GET", _) => app.client.get(url),
         ("DELETE", _) => app.client.delete(url),
         (m, t) => panic!("no request written for {m} {t}: add one to `request`"),
@@ -263,10 +278,17 @@ fn assert_refusal(
         .get("content-type")
         .and_then(|v| v.to_str().ok())
         .unwrap_or("");
-    assert_eq!(ct, "application/problem+json", "{what} on {method} {template}");
+    assert_eq!(
+        ct, "application/problem+json",
+        "{what} on {method} {template}"
+    );
     check_response(method, template, *status, ct, body);
     let p = json(body);
-    let slug = if want == 401 { "unauthorized" } else { "forbidden" };
+    let slug = if want == 401 {
+        "unauthorized"
+    } else {
+        "forbidden"
+    };
     assert_eq!(
         p["type"],
         format!("urn:gearwear:problem:{slug}"),
@@ -290,7 +312,12 @@ async fn bad_credentials(app: &TestApp) -> Vec<(&'static str, Option<HeaderValue
         gearwear::service::cli::create_key(app.store.as_ref(), &[Scope::Admin], "revoked")
             .await
             .unwrap();
-    assert!(app.store.revoke_key(&row.id, gearwear::store::now_ms()).await.unwrap());
+    assert!(
+        app.store
+            .revoke_key(&row.id, gearwear::store::now_ms())
+            .await
+            .unwrap()
+    );
     // A real admin key with its last character changed.
     let mut tampered = app.admin_key.clone();
     let last = tampered.pop().unwrap();
@@ -299,7 +326,10 @@ async fn bad_credentials(app: &TestApp) -> Vec<(&'static str, Option<HeaderValue
         ("no key", None),
         ("Basic credentials", hv("Basic dXNlcjpwYXNz".into())),
         ("Bearer without a key", hv("Bearer".into())),
-        ("a bearer token that is not a key", hv("Bearer hunter2".into())),
+        (
+            "a bearer token that is not a key",
+            hv("Bearer hunter2".into()),
+        ),
         (
             "a non-UTF-8 header",
             Some(HeaderValue::from_bytes(b"Bearer gw_\xff\xfe").unwrap()),
@@ -308,7 +338,10 @@ async fn bad_credentials(app: &TestApp) -> Vec<(&'static str, Option<HeaderValue
             "an unknown key",
             hv(format!("Bearer gw_0123456789abcdef_{}", "x".repeat(43))),
         ),
-        ("an admin key with a wrong secret", hv(format!("Bearer {tampered}"))),
+        (
+            "an admin key with a wrong secret",
+            hv(format!("Bearer {tampered}")),
+        ),
         ("a revoked admin key", hv(format!("Bearer {revoked}"))),
     ]
 }
@@ -338,7 +371,12 @@ async fn every_route_needs_a_key_of_its_scope(b: Backend) {
                     req = req.header("authorization", a.clone());
                 }
                 let (s, _, body) = send(req).await;
-                assert_eq!(s, 200, "{what} on public {method} {template}: {}", String::from_utf8_lossy(&body));
+                assert_eq!(
+                    s,
+                    200,
+                    "{what} on public {method} {template}: {}",
+                    String::from_utf8_lossy(&body)
+                );
                 n_public += 1;
             }
             continue;
@@ -453,7 +491,9 @@ async fn open_dashboard_opens_reads_only(b: Backend) {
         before,
         "a refused request changed the store"
     );
-    eprintln!("{b:?}: open dashboard: {reads} reads answered without a key, {writes} admin/ingest routes still 401");
+    eprintln!(
+        "{b:?}: open dashboard: {reads} reads answered without a key, {writes} admin/ingest routes still 401"
+    );
     assert!(reads >= 5 && writes >= 6);
 }
 
@@ -467,10 +507,23 @@ async fn keys_are_stored_hashed(b: Backend) {
     let url = app.db.as_ref().unwrap().url.clone();
     // The real command, as an operator runs it.
     let out = gw()
-        .args(["keys", "create", "--scope", "ingest,read", "--label", "hash-test", "--database-url", url.as_str()])
+        .args([
+            "keys",
+            "create",
+            "--scope",
+            "ingest,read",
+            "--label",
+            "hash-test",
+            "--database-url",
+            url.as_str(),
+        ])
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let token = String::from_utf8(out.stdout).unwrap().trim().to_string();
     assert!(
         !String::from_utf8_lossy(&out.stderr).contains(&token),
@@ -576,7 +629,11 @@ async fn limits_are_per_key(b: Backend) {
             .body(body)
     };
     let expect = |what: &str, (s, h, body): (u16, HeaderMap, Vec<u8>), status: u16, slug: &str| {
-        let ct = h.get("content-type").and_then(|v| v.to_str().ok()).unwrap_or("").to_string();
+        let ct = h
+            .get("content-type")
+            .and_then(|v| v.to_str().ok())
+            .unwrap_or("")
+            .to_string();
         assert_eq!(ct, "application/problem+json", "{what}");
         check_response("POST", template, s, &ct, &body);
         let p = json(&body);
@@ -595,12 +652,20 @@ async fn limits_are_per_key(b: Backend) {
         "body-too-large",
     );
     assert!(p["detail"].as_str().unwrap().len() > 20, "{p}");
-    let (s, raw) = chunked_post(&app.addr, "/v1/machines/lim/records?sample_rate_hz=25600", &big, 300 << 10).await;
+    let (s, raw) = chunked_post(
+        &app.addr,
+        "/v1/machines/lim/records?sample_rate_hz=25600",
+        &big,
+        300 << 10,
+    )
+    .await;
     assert_eq!(s, 413, "chunked body of 300 KiB: {raw}");
     assert!(raw.contains("body-too-large"), "{raw}");
     // Sample count over the limit, in each format (each body under the byte limit).
     let n = 10_001;
-    let f32le: Vec<u8> = (0..n).flat_map(|i| ((i as f32) * 1e-4).to_le_bytes()).collect();
+    let f32le: Vec<u8> = (0..n)
+        .flat_map(|i| ((i as f32) * 1e-4).to_le_bytes())
+        .collect();
     let csv: String = (0..n).map(|i| format!("{}\n", i as f64 * 1e-4)).collect();
     let js = serde_json::to_vec(&json!({"sample_rate_hz": 25600, "samples": (0..n).map(|i| i as f64 * 1e-4).collect::<Vec<_>>()})).unwrap();
     assert!(js.len() < 256 << 10);
@@ -609,14 +674,28 @@ async fn limits_are_per_key(b: Backend) {
         ("text/csv", csv.into_bytes()),
         ("application/json", js),
     ] {
-        let p = expect(&format!("{n} samples as {ct}"), send(post(ct, body)).await, 413, "too-many-samples");
+        let p = expect(
+            &format!("{n} samples as {ct}"),
+            send(post(ct, body)).await,
+            413,
+            "too-many-samples",
+        );
         assert_eq!(p["limit_samples"], 10_000, "{p}");
     }
 
     // Rate: a key gets its burst, then 429 with Retry-After; another key is not limited.
-    let get = |k: &str| app.client.get(app.url("/v1/machines")).bearer_auth(k).send();
+    let get = |k: &str| {
+        app.client
+            .get(app.url("/v1/machines"))
+            .bearer_auth(k)
+            .send()
+    };
     for i in 0..BURST {
-        assert_eq!(get(&read_a).await.unwrap().status(), 200, "request {i} of the burst");
+        assert_eq!(
+            get(&read_a).await.unwrap().status(),
+            200,
+            "request {i} of the burst"
+        );
     }
     let r = get(&read_a).await.unwrap();
     let retry: u64 = r
@@ -627,17 +706,35 @@ async fn limits_are_per_key(b: Backend) {
         .unwrap()
         .parse()
         .unwrap();
-    assert!((1..=3).contains(&retry), "Retry-After {retry} s at 0.5 per second");
-    let (s, h, body) = (r.status().as_u16(), r.headers().clone(), r.bytes().await.unwrap().to_vec());
+    assert!(
+        (1..=3).contains(&retry),
+        "Retry-After {retry} s at 0.5 per second"
+    );
+    let (s, h, body) = (
+        r.status().as_u16(),
+        r.headers().clone(),
+        r.bytes().await.unwrap().to_vec(),
+    );
     let ct = h["content-type"].to_str().unwrap().to_string();
     check_response("GET", "/v1/machines", s, &ct, &body);
     let p = json(&body);
-    assert_eq!((s, p["type"].as_str().unwrap()), (429, "urn:gearwear:problem:rate-limited"));
+    assert_eq!(
+        (s, p["type"].as_str().unwrap()),
+        (429, "urn:gearwear:problem:rate-limited")
+    );
     // The other key, right now.
-    assert_eq!(get(&read_b).await.unwrap().status(), 200, "one key's exhaustion limited another");
+    assert_eq!(
+        get(&read_b).await.unwrap().status(),
+        200,
+        "one key's exhaustion limited another"
+    );
     // Retry-After is honest: after it, the key is served again.
     tokio::time::sleep(Duration::from_secs(retry)).await;
-    assert_eq!(get(&read_a).await.unwrap().status(), 200, "served again after Retry-After");
+    assert_eq!(
+        get(&read_a).await.unwrap().status(),
+        200,
+        "served again after Retry-After"
+    );
 
     // An ingest key out of tokens: the record is refused and nothing is stored.
     let empty = json!({"sample_rate_hz": 25600, "samples": []});
@@ -661,7 +758,10 @@ async fn limits_are_per_key(b: Backend) {
         .await
         .unwrap();
     assert_eq!(r.status(), 429);
-    assert!(app.store.list_machines().await.unwrap().is_empty(), "a refused record was stored");
+    assert!(
+        app.store.list_machines().await.unwrap().is_empty(),
+        "a refused record was stored"
+    );
 }
 
 /// POST `len` bytes with `Transfer-Encoding: chunked` (no Content-Length) over a plain TCP
@@ -714,7 +814,11 @@ fn create_key_cli(url: &str, scope: &str) -> String {
         .args(["keys", "create", "--scope", scope, "--database-url", url])
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     String::from_utf8(out.stdout).unwrap().trim().to_string()
 }
 
@@ -745,7 +849,11 @@ impl Server {
             std::thread::spawn(move || {
                 let mut r = BufReader::new(s);
                 let mut line = Vec::new();
-                while r.read_until(b'\n', &mut line).map(|n| n > 0).unwrap_or(false) {
+                while r
+                    .read_until(b'\n', &mut line)
+                    .map(|n| n > 0)
+                    .unwrap_or(false)
+                {
                     out.lock().unwrap().extend_from_slice(&line);
                     line.clear();
                 }
@@ -786,7 +894,11 @@ impl Server {
                 tokio::time::sleep(Duration::from_millis(200)).await;
                 return st;
             }
-            assert!(t.elapsed() < within, "still running after {within:?}:\n{}", self.text());
+            assert!(
+                t.elapsed() < within,
+                "still running after {within:?}:\n{}",
+                self.text()
+            );
             tokio::time::sleep(Duration::from_millis(50)).await;
         }
     }
@@ -817,17 +929,33 @@ async fn no_secret_in_the_logs(b: Backend) {
     let revoked = create_key_cli(&db.url, "ingest,read");
     let revoked_id = gearwear::keys::split_token(&revoked).unwrap().0.to_string();
     let out = gw()
-        .args(["keys", "revoke", revoked_id.as_str(), "--database-url", db.url.as_str()])
+        .args([
+            "keys",
+            "revoke",
+            revoked_id.as_str(),
+            "--database-url",
+            db.url.as_str(),
+        ])
         .output()
         .unwrap();
     assert!(out.status.success());
 
     let filter = "debug,gearwear=trace,tower_http=trace,reqwest=trace,hyper=trace,hyper_util=trace";
     let mut srv = Server::start(
-        &["--address", "127.0.0.1:0", "--database-url", &db.url, "--log-json", "--allow-stale-table"],
+        &[
+            "--address",
+            "127.0.0.1:0",
+            "--database-url",
+            &db.url,
+            "--log-json",
+            "--allow-stale-table",
+        ],
         &[("RUST_LOG", filter), ("NO_COLOR", "1")],
     );
-    let port = srv.port(Duration::from_secs(120)).await.expect("serve started");
+    let port = srv
+        .port(Duration::from_secs(120))
+        .await
+        .expect("serve started");
     let base = format!("http://127.0.0.1:{port}");
     let c = reqwest::Client::new();
     let mut tampered = read.clone();
@@ -844,11 +972,21 @@ async fn no_secret_in_the_logs(b: Backend) {
             .send()
     };
     assert_eq!(rec(&ingest).await.unwrap().status(), 201);
-    let r = c.get(format!("{base}/v1/machines")).bearer_auth(&read).send().await.unwrap();
+    let r = c
+        .get(format!("{base}/v1/machines"))
+        .bearer_auth(&read)
+        .send()
+        .await
+        .unwrap();
     assert_eq!(r.status(), 200);
     // Bad ones.
     for k in [&tampered, &not_a_key, &unknown, &revoked] {
-        let r = c.get(format!("{base}/v1/machines")).bearer_auth(k).send().await.unwrap();
+        let r = c
+            .get(format!("{base}/v1/machines"))
+            .bearer_auth(k)
+            .send()
+            .await
+            .unwrap();
         assert_eq!(r.status(), 401, "{k}");
     }
     assert_eq!(rec(&revoked).await.unwrap().status(), 401);
@@ -871,11 +1009,18 @@ async fn no_secret_in_the_logs(b: Backend) {
     assert_eq!(rec(&ingest).await.unwrap().status(), 201);
     let t = Instant::now();
     while rx.got.lock().unwrap().is_empty() {
-        assert!(t.elapsed() < Duration::from_secs(60), "no delivery:\n{}", srv.text());
+        assert!(
+            t.elapsed() < Duration::from_secs(60),
+            "no delivery:\n{}",
+            srv.text()
+        );
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
     let r = c
-        .get(format!("{base}/v1/webhooks/{}/deliveries", hook["id"].as_str().unwrap()))
+        .get(format!(
+            "{base}/v1/webhooks/{}/deliveries",
+            hook["id"].as_str().unwrap()
+        ))
         .bearer_auth(&admin)
         .send()
         .await
@@ -883,6 +1028,12 @@ async fn no_secret_in_the_logs(b: Backend) {
     assert_eq!(r.status(), 200);
     assert!(srv.terminate().await.success(), "{}", srv.text());
     let logs = srv.text();
+    // Kept for reading: target/tmp/security-logs-<store>.jsonl.
+    let _ = std::fs::write(
+        std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+            .join(format!("security-logs-{b:?}.jsonl")),
+        &logs,
+    );
 
     // The filter was in force: the logs have what the secrets would be next to.
     for want in [
@@ -897,18 +1048,29 @@ async fn no_secret_in_the_logs(b: Backend) {
     let lines = logs.lines().count();
     let mut secrets: Vec<(&str, String)> = vec![
         ("webhook secret", whsec.clone()),
-        ("webhook secret body", whsec.trim_start_matches("whsec_").to_string()),
+        (
+            "webhook secret body",
+            whsec.trim_start_matches("whsec_").to_string(),
+        ),
         ("not-a-key token", not_a_key.clone()),
         ("token in the webhook URL", url_token.clone()),
         ("unknown key", unknown.clone()),
         ("tampered key", tampered.clone()),
     ];
-    for (what, k) in [("ingest", &ingest), ("read", &read), ("admin", &admin), ("revoked", &revoked)] {
+    for (what, k) in [
+        ("ingest", &ingest),
+        ("read", &read),
+        ("admin", &admin),
+        ("revoked", &revoked),
+    ] {
         secrets.push((what, k.to_string()));
         secrets.push((what, gearwear::keys::split_token(k).unwrap().1.to_string()));
         secrets.push((what, format!("Bearer {k}")));
     }
-    let tampered_secret = gearwear::keys::split_token(&tampered).unwrap().1.to_string();
+    let tampered_secret = gearwear::keys::split_token(&tampered)
+        .unwrap()
+        .1
+        .to_string();
     secrets.push(("tampered secret", tampered_secret));
     for (what, s) in &secrets {
         assert!(!logs.contains(s.as_str()), "the {what} is in the logs");
@@ -948,8 +1110,12 @@ fn documented_verify(header: &str, secret: &str, body: &[u8]) -> bool {
 
 /// The Python block of docs/service.md, run as written; `None` without python3.
 fn python_verify(header: &str, secret: &str, body: &[u8]) -> Option<bool> {
-    let doc = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/docs/service.md")).unwrap();
-    let start = doc.find("```python\n").expect("a python block in docs/service.md") + 10;
+    let doc =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/docs/service.md")).unwrap();
+    let start = doc
+        .find("```python\n")
+        .expect("a python block in docs/service.md")
+        + 10;
     let snippet = &doc[start..start + doc[start..].find("```").unwrap()];
     assert!(snippet.contains("ok = "), "the recipe sets `ok`: {snippet}");
     let dir = std::env::temp_dir().join(format!("gw-sig-{}", uuid::Uuid::new_v4().simple()));
@@ -1005,9 +1171,15 @@ async fn webhook_signature_follows_the_documented_recipe(b: Backend) {
     let (t, v1) = header.split_once(',').unwrap();
     let t: i64 = t.strip_prefix("t=").expect("t= first").parse().unwrap();
     let v1 = v1.strip_prefix("v1=").expect("v1= second");
-    assert!(v1.len() == 64 && v1.bytes().all(|c| c.is_ascii_hexdigit()), "{header}");
+    assert!(
+        v1.len() == 64 && v1.bytes().all(|c| c.is_ascii_hexdigit()),
+        "{header}"
+    );
     let now = gearwear::store::now_ms() / 1000;
-    assert!((now - t).abs() <= 300, "t={t} is not the time of sending ({now})");
+    assert!(
+        (now - t).abs() <= 300,
+        "t={t} is not the time of sending ({now})"
+    );
 
     let mut tampered = body.to_vec();
     let i = tampered.iter().position(|c| *c == b'm').unwrap();
@@ -1015,14 +1187,27 @@ async fn webhook_signature_follows_the_documented_recipe(b: Backend) {
     let later = format!("t={},v1={v1}", t + 1);
     let cases: [(&str, &str, &[u8], bool); 4] = [
         ("the delivery as received", secret.as_str(), &body[..], true),
-        ("a body changed in one byte", secret.as_str(), &tampered[..], false),
+        (
+            "a body changed in one byte",
+            secret.as_str(),
+            &tampered[..],
+            false,
+        ),
         ("another webhook's secret", other.as_str(), &body[..], false),
         ("a changed timestamp", secret.as_str(), &body[..], false),
     ];
     let mut python_ran = false;
     for (what, key, payload, want) in cases {
-        let hdr = if what == "a changed timestamp" { later.as_str() } else { header.as_str() };
-        assert_eq!(documented_verify(hdr, key, payload), want, "Rust recipe: {what}");
+        let hdr = if what == "a changed timestamp" {
+            later.as_str()
+        } else {
+            header.as_str()
+        };
+        assert_eq!(
+            documented_verify(hdr, key, payload),
+            want,
+            "Rust recipe: {what}"
+        );
         if let Some(ok) = python_verify(hdr, key, payload) {
             assert_eq!(ok, want, "docs/service.md's Python recipe: {what}");
             python_ran = true;
@@ -1030,7 +1215,11 @@ async fn webhook_signature_follows_the_documented_recipe(b: Backend) {
     }
     eprintln!(
         "{b:?}: signature verified with the documented recipe (Rust{}); 3 forgeries refused",
-        if python_ran { " and docs/service.md's Python, run as written" } else { " only" }
+        if python_ran {
+            " and docs/service.md's Python, run as written"
+        } else {
+            " only"
+        }
     );
 }
 
@@ -1043,10 +1232,22 @@ async fn non_loopback_address_needs_an_active_key(b: Backend) {
     let refused = |addr: &'static str| {
         let url = db.url.clone();
         async move {
-            let mut s = Server::start(&["--address", addr, "--database-url", &url, "--allow-stale-table"], &[]);
+            let mut s = Server::start(
+                &[
+                    "--address",
+                    addr,
+                    "--database-url",
+                    &url,
+                    "--allow-stale-table",
+                ],
+                &[],
+            );
             let st = s.exit(Duration::from_secs(60)).await;
             let text = s.text();
-            assert!(!st.success(), "{addr} without an active key started:\n{text}");
+            assert!(
+                !st.success(),
+                "{addr} without an active key started:\n{text}"
+            );
             assert!(
                 text.contains("not a loopback address") && text.contains("gearwear keys create"),
                 "{addr}: the refusal says what to do:\n{text}"
@@ -1059,14 +1260,31 @@ async fn non_loopback_address_needs_an_active_key(b: Backend) {
     // A key: it starts, answers on the port, and still wants keys.
     let key = create_key_cli(&db.url, "read");
     let mut s = Server::start(
-        &["--address", "0.0.0.0:0", "--database-url", &db.url, "--allow-stale-table"],
+        &[
+            "--address",
+            "0.0.0.0:0",
+            "--database-url",
+            &db.url,
+            "--allow-stale-table",
+        ],
         &[],
     );
-    let port = s.port(Duration::from_secs(120)).await.expect("serve on 0.0.0.0 with a key");
+    let port = s
+        .port(Duration::from_secs(120))
+        .await
+        .expect("serve on 0.0.0.0 with a key");
     let c = reqwest::Client::new();
-    let h = c.get(format!("http://127.0.0.1:{port}/healthz")).send().await.unwrap();
+    let h = c
+        .get(format!("http://127.0.0.1:{port}/healthz"))
+        .send()
+        .await
+        .unwrap();
     assert_eq!(h.status(), 200);
-    let r = c.get(format!("http://127.0.0.1:{port}/v1/machines")).send().await.unwrap();
+    let r = c
+        .get(format!("http://127.0.0.1:{port}/v1/machines"))
+        .send()
+        .await
+        .unwrap();
     assert_eq!(r.status(), 401);
     let r = c
         .get(format!("http://127.0.0.1:{port}/v1/machines"))
@@ -1078,7 +1296,19 @@ async fn non_loopback_address_needs_an_active_key(b: Backend) {
     assert!(s.terminate().await.success());
     // Only a revoked key left: refused again.
     let id = gearwear::keys::split_token(&key).unwrap().0.to_string();
-    assert!(gw().args(["keys", "revoke", id.as_str(), "--database-url", db.url.as_str()]).status().unwrap().success());
+    assert!(
+        gw().args([
+            "keys",
+            "revoke",
+            id.as_str(),
+            "--database-url",
+            db.url.as_str()
+        ])
+        .output()
+        .unwrap()
+        .status
+        .success()
+    );
     refused("0.0.0.0:0").await;
 }
 
@@ -1124,7 +1354,10 @@ async fn webhook_urls_are_restricted(b: Backend) {
         let detail = p["detail"].as_str().unwrap();
         assert!(detail.contains(says), "{url}: {detail}");
         if !says.is_empty() && says != "http:// or https://" && says != "absolute" {
-            assert!(detail.contains("loopback"), "{url}: the detail says what is allowed: {detail}");
+            assert!(
+                detail.contains("loopback"),
+                "{url}: the detail says what is allowed: {detail}"
+            );
         }
     }
     let allowed = [
