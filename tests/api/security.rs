@@ -1046,6 +1046,19 @@ async fn no_secret_in_the_logs(b: Backend) {
         assert!(logs.contains(want), "`{want}` not in the logs:\n{logs}");
     }
     let lines = logs.lines().count();
+    // Every line is a JSON event whose `level` is a log level (a field named `level` once
+    // overwrote it: "record accepted" came out as `"level":"warning"`).
+    for line in logs.lines() {
+        let v: Value = serde_json::from_str(line)
+            .unwrap_or_else(|e| panic!("a log line that is not JSON ({e}): {line}"));
+        assert!(
+            matches!(
+                v["level"].as_str(),
+                Some("TRACE" | "DEBUG" | "INFO" | "WARN" | "ERROR")
+            ),
+            "{line}"
+        );
+    }
     let mut secrets: Vec<(&str, String)> = vec![
         ("webhook secret", whsec.clone()),
         (
