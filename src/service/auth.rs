@@ -120,7 +120,7 @@ pub const SWEEP_AT: usize = 1024;
 
 struct Buckets {
     map: HashMap<String, (f64, Instant)>,
-    /// Sweep when the map holds more buckets than this.
+    /// Sweep when the map holds this many buckets and a new key arrives.
     sweep_at: usize,
     min_sweep_at: usize,
 }
