@@ -10,6 +10,10 @@
 //!   counted as `late` and sent when one frees) — the soak test at a chosen fraction of
 //!   capacity.
 //!
+//! `--record FILE` sends that record (any file `gearwear diagnose` reads, e.g. one written by
+//! `gearwear synth`) instead of the built-in four-sine record, which fits the model poorly and
+//! so takes the diagnosis's slowest path.
+//!
 //! `--report-every S` prints one line per S-second window (records, errors, p50/p99, server
 //! RSS) so a soak shows start and end; the last line is a JSON summary for scripts.
 //!
@@ -63,6 +67,22 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
     sorted[((sorted.len() as f64 - 1.0) * p).round() as usize] * 1e3
 }
 
+/// 1 s at 25.6 kHz: f1 = 1.07·870 Hz with three partner sines and a little noise.
+fn four_sines() -> Vec<f64> {
+    let fs = 25_600.0;
+    let f1 = 1.07 * 870.0;
+    (0..25_600)
+        .map(|i| {
+            let t = i as f64 / fs;
+            (TAU * f1 * t).sin()
+                + 0.2 * (TAU * 0.36 * f1 * t).sin()
+                + 0.05 * (TAU * 0.0875 * f1 * t).sin()
+                + 0.3 * (TAU * 2.0 * f1 * t).sin()
+                + 0.01 * ((i * 7919 % 1000) as f64 / 1000.0 - 0.5)
+        })
+        .collect()
+}
+
 #[derive(Default)]
 struct Window {
     lat: Vec<f64>,
@@ -81,25 +101,32 @@ async fn main() {
     let machines: usize = arg(&args, "--machines", "4").parse().unwrap();
     let format = arg(&args, "--format", "json");
     let pid = arg(&args, "--pid", "");
-    let fs = 25_600.0;
-    let f1 = 1.07 * 870.0;
-    let x: Vec<f64> = (0..25_600)
-        .map(|i| {
-            let t = i as f64 / fs;
-            (TAU * f1 * t).sin()
-                + 0.2 * (TAU * 0.36 * f1 * t).sin()
-                + 0.05 * (TAU * 0.0875 * f1 * t).sin()
-                + 0.3 * (TAU * 2.0 * f1 * t).sin()
-                + 0.01 * ((i * 7919 % 1000) as f64 / 1000.0 - 0.5)
-        })
-        .collect();
+    let record = arg(&args, "--record", "");
+    // The default record: four sines and a little noise (a poor fit to the model, so the
+    // diagnosis tries every f1 candidate — the slow path); `--record FILE` sends any record
+    // file `gearwear diagnose` reads (e.g. one written by `gearwear synth`), resampled to
+    // nothing: its own samples and rate.
+    let (x, fs) = if record.is_empty() {
+        (four_sines(), 25_600.0)
+    } else {
+        let r = gearwear::record::read_record(
+            std::path::Path::new(&record),
+            &gearwear::record::ReadOptions::default(),
+        )
+        .unwrap_or_else(|e| panic!("--record {record}: {e}"));
+        (r.samples, r.sample_rate)
+    };
     let (body, ct, q) = if format == "f32" {
         let b: Vec<u8> = x.iter().flat_map(|v| (*v as f32).to_le_bytes()).collect();
-        (b, "application/octet-stream", "?sample_rate_hz=25600")
+        (
+            b,
+            "application/octet-stream",
+            format!("?sample_rate_hz={fs}"),
+        )
     } else {
         let b =
             serde_json::to_vec(&serde_json::json!({"sample_rate_hz": fs, "samples": x})).unwrap();
-        (b, "application/json", "")
+        (b, "application/json", String::new())
     };
     println!(
         "body: {} bytes ({ct}); {}",
@@ -183,8 +210,13 @@ async fn main() {
         if Instant::now() >= end {
             break;
         }
-        let (client, body, url, key) =
-            (client.clone(), body_bytes.clone(), url.clone(), key.clone());
+        let (client, body, url, key, q) = (
+            client.clone(),
+            body_bytes.clone(),
+            url.clone(),
+            key.clone(),
+            q.clone(),
+        );
         let (window, all) = (window.clone(), all.clone());
         let m = i % machines.max(1);
         tasks.push(tokio::spawn(async move {

@@ -821,8 +821,9 @@ fn locate_f1(
 
 /// Diagnose one record against a signature table. See the [module docs](self).
 ///
-/// Errors (each carries the numbers): [`Error::RecordTooShort`] (empty, or fewer f1 periods
-/// than one estimator segment), [`Error::NonFiniteSample`], [`Error::SampleRateTooLow`],
+/// Errors (each carries the numbers): [`Error::EmptyRecord`], [`Error::FlatRecord`],
+/// [`Error::ClippedRecord`] (see [`crate::record::check_signal`]), [`Error::RecordTooShort`]
+/// (fewer f1 periods than one estimator segment), [`Error::NonFiniteSample`], [`Error::SampleRateTooLow`],
 /// [`Error::NoMeshLine`], [`Error::SpeedOutOfBand`], [`Error::InvalidParameter`] for a bad
 /// shaft rate or sample rate.
 pub fn diagnose(
@@ -843,16 +844,8 @@ pub fn diagnose_with(
 ) -> Result<Diagnosis> {
     let x = &record.samples;
     let fs = record.sample_rate;
-    if !(fs.is_finite() && fs > 0.0) {
-        return Err(Error::param(
-            "sample rate",
-            fs,
-            "must be a positive number of samples per second",
-        ));
-    }
-    if let Some((index, &value)) = x.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-        return Err(Error::NonFiniteSample { index, value });
-    }
+    crate::record::check_sample_rate(fs)?;
+    crate::record::check_signal(x)?;
     let cfg = &table.model;
     let fr = cfg.tooth_counts().frequencies();
     let f_ref = cfg.reference_frequency_hz;

@@ -46,6 +46,35 @@ pub enum Error {
     /// A record file could not be read as the stated format.
     #[error("record {path}: {reason}")]
     RecordFormat { path: String, reason: String },
+    /// A record holds no samples at all.
+    #[error("the record holds no samples; send at least one second of signal")]
+    EmptyRecord,
+    /// Every sample has the same value: no vibration was recorded.
+    #[error(
+        "all {samples} samples of the record are {value}: it carries no vibration (a \
+         disconnected sensor, a dead channel or the wrong column?)"
+    )]
+    FlatRecord { samples: usize, value: f64 },
+    /// The record sits at its extreme value for runs of samples: the sensor or ADC saturated.
+    #[error(
+        "the record is clipped: {count} samples ({percent:.2} %) sit exactly at its {side} {level} \
+         in runs of up to {longest_run}; the sensor or its ADC saturated, which adds harmonics the \
+         gearbox did not make — lower the gain or widen the input range and record again"
+    )]
+    ClippedRecord {
+        /// `"maximum"` or `"minimum"`.
+        side: &'static str,
+        level: f64,
+        count: usize,
+        percent: f64,
+        longest_run: usize,
+    },
+    /// The record's format carries no sample rate and none was given.
+    #[error("{format} carries no sample rate: give it (--sample-rate HZ)")]
+    MissingSampleRate {
+        /// What lacks it, e.g. "raw f32 (no header)".
+        format: &'static str,
+    },
     /// A record sample is NaN or ±∞.
     #[error("sample {index} of the record is {value}; the record must contain only finite numbers")]
     NonFiniteSample { index: usize, value: f64 },

@@ -214,16 +214,20 @@ pub fn csv_gz(data: &[u8]) {
 }
 
 /// Raw little-endian `f32` as the service (`application/octet-stream`) and the CLI read it.
-/// Checks: accepted exactly when the length is a positive multiple of 4, every value is finite
-/// and a rate is given; then `len/4` samples equal to the input's values.
+/// Checks: accepted exactly when the length is a positive multiple of 4, every value is finite,
+/// the samples pass [`crate::record::check_signal`] (not flat, not clipped) and a rate is
+/// given; then `len/4` samples equal to the input's values.
 pub fn f32_raw(data: &[u8]) {
     service_binary(BodyFormat::F32, data);
     let values: Vec<f32> = data
         .chunks_exact(4)
         .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
         .collect();
-    let valid =
-        !data.is_empty() && data.len().is_multiple_of(4) && values.iter().all(|v| v.is_finite());
+    let valid = !data.is_empty()
+        && data.len().is_multiple_of(4)
+        && values.iter().all(|v| v.is_finite())
+        && crate::record::check_signal(&values.iter().map(|&v| f64::from(v)).collect::<Vec<_>>())
+            .is_ok();
     let o = opts(Format::F32, Some(FS), None);
     match parse_record(data, Format::F32, &o, "fuzz") {
         Ok(r) => {

@@ -134,6 +134,125 @@ pub fn gunzip(bytes: &[u8], origin: &str, limit: usize) -> Result<Vec<u8>> {
     Ok(out)
 }
 
+/// Highest sample rate a record may claim: 10 MHz, far above any vibration ADC. A larger value
+/// is a unit mistake (ns for s, a sample count for a rate), not a measurement.
+pub const MAX_SAMPLE_RATE_HZ: f64 = 10e6;
+
+/// Refuse a sample rate that is not a positive finite number of Hz up to
+/// [`MAX_SAMPLE_RATE_HZ`], with [`Error::InvalidParameter`] (`"sample rate"`).
+pub fn check_sample_rate(fs: f64) -> Result<()> {
+    if !(fs.is_finite() && fs > 0.0) {
+        return Err(Error::param(
+            "sample rate",
+            fs,
+            "must be a positive number of samples per second",
+        ));
+    }
+    if fs > MAX_SAMPLE_RATE_HZ {
+        return Err(Error::param(
+            "sample rate",
+            fs,
+            format!(
+                "is above {MAX_SAMPLE_RATE_HZ:e} Hz, beyond any vibration ADC; give the rate in \
+                 samples per second"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Smallest number of samples at one extreme that can count as clipping, as a fraction of the
+/// record (0.1 %; at least [`CLIP_MIN_COUNT`]).
+pub const CLIP_MIN_FRACTION: f64 = 1e-3;
+/// Smallest number of samples at one extreme that can count as clipping.
+pub const CLIP_MIN_COUNT: usize = 8;
+/// Shortest run of consecutive samples at the extreme that counts as a saturated plateau.
+pub const CLIP_MIN_RUN: usize = 3;
+/// How many times more samples the extreme value must hold than the nearest value inside it.
+pub const CLIP_PILE_UP: usize = 4;
+
+/// Refuse a record whose samples cannot be a vibration measurement: empty
+/// ([`Error::EmptyRecord`]), NaN or ±∞ ([`Error::NonFiniteSample`]), all one value
+/// ([`Error::FlatRecord`]) or clipped ([`Error::ClippedRecord`]).
+///
+/// Clipping: a saturated sensor or ADC writes its limit value for as long as the signal stays
+/// beyond it, so the record's maximum (or minimum) value is *exactly* repeated, in plateaus,
+/// far more often than any value just inside it. The rule, per extreme: at least
+/// max([`CLIP_MIN_COUNT`], [`CLIP_MIN_FRACTION`]·n) samples equal to it, a run of at least
+/// [`CLIP_MIN_RUN`] consecutive ones, and at least [`CLIP_PILE_UP`] times as many as the
+/// nearest value inside. An unclipped continuous record holds its extreme once; a quantised
+/// unclipped sine holds its top ADC code at most ≈ 2.4 times as often as the next code (the
+/// arcsine density near a peak), so neither trips the rule. Checked on the SpectraQuest
+/// records (`shared/data`): every channel holds its extremes once.
+pub fn check_signal(x: &[f64]) -> Result<()> {
+    if x.is_empty() {
+        return Err(Error::EmptyRecord);
+    }
+    // Branch-free passes (they vectorise): extremes with NaN/∞ folded in, then counts at the
+    // extremes; the detailed look only when a count is large enough to matter.
+    let (mut hi, mut lo, mut finite) = (f64::NEG_INFINITY, f64::INFINITY, true);
+    for &v in x {
+        hi = hi.max(v);
+        lo = lo.min(v);
+        finite &= v.is_finite();
+    }
+    if !finite {
+        let (index, &value) = x
+            .iter()
+            .enumerate()
+            .find(|(_, v)| !v.is_finite())
+            .expect("a non-finite sample exists");
+        return Err(Error::NonFiniteSample { index, value });
+    }
+    if x.len() < 2 {
+        return Ok(());
+    }
+    if hi == lo {
+        return Err(Error::FlatRecord {
+            samples: x.len(),
+            value: hi,
+        });
+    }
+    let (n_hi, n_lo) = x.iter().fold((0usize, 0usize), |(h, l), &v| {
+        (h + usize::from(v == hi), l + usize::from(v == lo))
+    });
+    let need = CLIP_MIN_COUNT.max((CLIP_MIN_FRACTION * x.len() as f64).ceil() as usize);
+    for (side, level, count) in [("maximum", hi, n_hi), ("minimum", lo, n_lo)] {
+        if count < need {
+            continue;
+        }
+        let (mut run, mut longest) = (0usize, 0usize);
+        // The nearest value inside the extreme and how often it occurs.
+        let mut next = f64::NAN;
+        let mut next_count = 0usize;
+        for &v in x {
+            if v == level {
+                run += 1;
+                longest = longest.max(run);
+            } else {
+                run = 0;
+                let closer = next.is_nan() || if level == hi { v > next } else { v < next };
+                if closer {
+                    next = v;
+                    next_count = 1;
+                } else if v == next {
+                    next_count += 1;
+                }
+            }
+        }
+        if longest >= CLIP_MIN_RUN && count >= CLIP_PILE_UP * next_count {
+            return Err(Error::ClippedRecord {
+                side,
+                level,
+                count,
+                percent: 100.0 * count as f64 / x.len() as f64,
+                longest_run: longest,
+            });
+        }
+    }
+    Ok(())
+}
+
 /// Parse a record from bytes (already decompressed); `origin` names it in errors.
 pub fn parse_record(
     bytes: &[u8],
@@ -141,26 +260,17 @@ pub fn parse_record(
     opts: &ReadOptions,
     origin: &str,
 ) -> Result<Record> {
-    if let Some(fs) = opts.sample_rate
-        && !(fs.is_finite() && fs > 0.0)
-    {
-        return Err(Error::param(
-            "sample rate",
-            fs,
-            "must be a positive number of samples per second",
-        ));
+    if let Some(fs) = opts.sample_rate {
+        check_sample_rate(fs)?;
     }
     let rec = match format {
         Format::Csv => parse_csv(bytes, opts, origin)?,
         Format::F32 => parse_f32(bytes, opts, origin)?,
         Format::Wav => parse_wav(bytes, opts, origin)?,
     };
-    if rec.samples.is_empty() {
-        return Err(fmt_err(origin, "the record holds no samples"));
-    }
-    if let Some((index, &value)) = rec.samples.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-        return Err(Error::NonFiniteSample { index, value });
-    }
+    // A CSV time column or a WAV header states its own rate: the same bounds apply.
+    check_sample_rate(rec.sample_rate)?;
+    check_signal(&rec.samples)?;
     Ok(rec)
 }
 
@@ -240,7 +350,8 @@ fn parse_csv(bytes: &[u8], opts: &ReadOptions, origin: &str) -> Result<Record> {
         n_rows += 1;
     }
     if n_rows == 0 {
-        return Err(fmt_err(origin, "no numeric rows (empty file?)"));
+        // Empty, or only a header and comments: a record without samples, not a format error.
+        return Err(Error::EmptyRecord);
     }
     let names = header.clone().unwrap_or_default();
     let is_time = |s: &str| {
@@ -334,10 +445,9 @@ fn parse_csv(bytes: &[u8], opts: &ReadOptions, origin: &str) -> Result<Record> {
                 rate
             }
             _ => {
-                return Err(fmt_err(
-                    origin,
-                    "no time column: give the sample rate (--sample-rate HZ)",
-                ));
+                return Err(Error::MissingSampleRate {
+                    format: "a CSV without a time column",
+                });
             }
         },
     };
@@ -348,11 +458,8 @@ fn parse_csv(bytes: &[u8], opts: &ReadOptions, origin: &str) -> Result<Record> {
 }
 
 fn parse_f32(bytes: &[u8], opts: &ReadOptions, origin: &str) -> Result<Record> {
-    let fs = opts.sample_rate.ok_or_else(|| {
-        fmt_err(
-            origin,
-            "raw f32 has no header: give the sample rate (--sample-rate HZ)",
-        )
+    let fs = opts.sample_rate.ok_or(Error::MissingSampleRate {
+        format: "raw f32 (no header)",
     })?;
     if !bytes.len().is_multiple_of(4) {
         return Err(fmt_err(
@@ -512,6 +619,102 @@ pub fn encode_wav(samples: &[f64], sample_rate: u32, float: bool) -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn sine(n: usize, per_period: f64, amp: f64) -> Vec<f64> {
+        (0..n)
+            .map(|i| amp * (std::f64::consts::TAU * i as f64 / per_period + 0.3).sin())
+            .collect()
+    }
+
+    #[test]
+    fn check_signal_refuses_empty_nan_flat_and_clipped() {
+        assert!(matches!(check_signal(&[]), Err(Error::EmptyRecord)));
+        assert!(matches!(
+            check_signal(&[1.0, f64::NAN, 2.0]),
+            Err(Error::NonFiniteSample { index: 1, .. })
+        ));
+        assert!(matches!(
+            check_signal(&[0.0, 1.0, f64::NEG_INFINITY]),
+            Err(Error::NonFiniteSample { index: 2, .. })
+        ));
+        assert!(matches!(
+            check_signal(&[0.0; 1000]),
+            Err(Error::FlatRecord { samples: 1000, .. })
+        ));
+        // One sample is not flat: the estimator says it is too short.
+        assert!(check_signal(&[0.5]).is_ok());
+        // A sine of amplitude 1.6 through an ADC whose range ends at ±1.
+        let clipped: Vec<f64> = sine(25_600, 29.4, 1.6)
+            .iter()
+            .map(|v| v.clamp(-1.0, 1.0))
+            .collect();
+        match check_signal(&clipped) {
+            Err(Error::ClippedRecord {
+                side,
+                level,
+                longest_run,
+                ..
+            }) => {
+                assert_eq!((side, level), ("maximum", 1.0));
+                assert!(longest_run >= 5, "{longest_run}");
+            }
+            other => panic!("clipped sine passed: {other:?}"),
+        }
+        // Only the bottom saturates.
+        let bottom: Vec<f64> = sine(25_600, 29.4, 1.0)
+            .iter()
+            .map(|v| v.max(-0.8))
+            .collect();
+        assert!(matches!(
+            check_signal(&bottom),
+            Err(Error::ClippedRecord {
+                side: "minimum",
+                ..
+            })
+        ));
+    }
+
+    #[test]
+    fn check_signal_accepts_unclipped_records_even_coarsely_quantised() {
+        // Continuous values: every extreme occurs once.
+        assert!(check_signal(&sine(25_600, 29.4, 1.6)).is_ok());
+        // A slow sine on an 8-bit ADC using its whole range: the top code is held for several
+        // samples at each peak, but no more often than the codes just below (no pile-up).
+        for per_period in [29.4, 200.0, 1000.0] {
+            let q: Vec<f64> = sine(25_600, per_period, 127.0)
+                .iter()
+                .map(|v| v.round())
+                .collect();
+            assert!(
+                check_signal(&q).is_ok(),
+                "8-bit sine, {per_period} samples/period"
+            );
+        }
+        // Plus noise, 16-bit.
+        let mut state = 7u64;
+        let noisy: Vec<f64> = sine(25_600, 29.4, 20_000.0)
+            .iter()
+            .map(|v| {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (v + ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 2000.0).round()
+            })
+            .collect();
+        assert!(check_signal(&noisy).is_ok());
+    }
+
+    #[test]
+    fn sample_rates_beyond_any_adc_are_refused() {
+        assert!(check_sample_rate(25_600.0).is_ok());
+        assert!(check_sample_rate(MAX_SAMPLE_RATE_HZ).is_ok());
+        for bad in [0.0, -1.0, f64::NAN, f64::INFINITY, 1e12] {
+            assert!(
+                matches!(check_sample_rate(bad), Err(Error::InvalidParameter { .. })),
+                "{bad}"
+            );
+        }
+    }
 
     fn opts(fs: Option<f64>, col: Option<&str>) -> ReadOptions {
         ReadOptions {

@@ -228,9 +228,17 @@ fn bad_records_get_specific_errors() {
         samples: vec![],
         sample_rate: 25_600.0,
     };
+    assert!(matches!(diagnose(&empty, t, &o), Err(Error::EmptyRecord)));
+    let flat = Record {
+        samples: vec![0.25; 25_600],
+        sample_rate: 25_600.0,
+    };
     assert!(matches!(
-        diagnose(&empty, t, &o),
-        Err(Error::RecordTooShort { samples: 0, .. })
+        diagnose(&flat, t, &o),
+        Err(Error::FlatRecord {
+            samples: 25_600,
+            ..
+        })
     ));
     let short = synthetic(870.0, 25_600.0, 0.02, 1.0);
     assert!(matches!(
@@ -248,8 +256,17 @@ fn bad_records_get_specific_errors() {
         diagnose(&slow, t, &o),
         Err(Error::SampleRateTooLow { .. })
     ));
+    // White noise: no line anywhere (all zeros would be refused as a flat record first).
+    let mut state = 99u64;
     let noise = Record {
-        samples: vec![0.0; 25_600],
+        samples: (0..25_600)
+            .map(|_| {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+            })
+            .collect(),
         sample_rate: 25_600.0,
     };
     assert!(matches!(

@@ -3,7 +3,6 @@
 use axum::extract::{Path, RawQuery, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
-use base64::Engine;
 use serde::Deserialize;
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
@@ -143,15 +142,20 @@ struct ListQuery {
     limit: Option<String>,
 }
 
+/// A cursor is the `seq` of the last diagnosis on the previous page, in decimal: any digit
+/// string is a valid cursor ("after that point"), and the empty string is the first page.
 fn encode_cursor(seq: i64) -> String {
-    base64::engine::general_purpose::URL_SAFE_NO_PAD.encode(format!("d:{seq}"))
+    seq.to_string()
 }
 
 fn decode_cursor(c: &str) -> Option<i64> {
-    let b = base64::engine::general_purpose::URL_SAFE_NO_PAD
-        .decode(c)
-        .ok()?;
-    String::from_utf8(b).ok()?.strip_prefix("d:")?.parse().ok()
+    if c.is_empty() {
+        return Some(0);
+    }
+    if c.len() > 18 || !c.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    c.parse().ok()
 }
 
 pub async fn list_diagnoses(
@@ -196,7 +200,7 @@ pub async fn list_diagnoses(
         Some(c) => decode_cursor(c).ok_or_else(|| {
             bad(
                 "cursor",
-                "`cursor` must be a `next_cursor` value from an earlier page".into(),
+                "`cursor` must be the `next_cursor` of an earlier page (digits only)".into(),
             )
         })?,
     };

@@ -204,6 +204,18 @@ pub fn problem_from_error(e: &crate::Error) -> ApiError {
             "Malformed record",
             format!("the body could not be read as the stated format: {reason}"),
         ),
+        E::EmptyRecord => un("empty-record", "Empty record", e.to_string()),
+        E::MissingSampleRate { .. } => {
+            un("missing-sample-rate", "Sample rate missing", e.to_string())
+        }
+        E::FlatRecord { samples, .. } => {
+            un("flat-record", "Flat record", e.to_string()).with("samples", *samples as u64)
+        }
+        E::ClippedRecord {
+            count, longest_run, ..
+        } => un("clipped-record", "Clipped record", e.to_string())
+            .with("clipped_samples", *count as u64)
+            .with("longest_run", *longest_run as u64),
         E::NonFiniteSample { index, value } => un(
             "non-finite-sample",
             "Non-finite sample",
@@ -260,13 +272,6 @@ fn decode_binary(
         BodyFormat::Wav => Format::Wav,
         BodyFormat::Json => unreachable!("JSON is decoded by serde"),
     };
-    if sample_rate.is_none() && format == BodyFormat::F32 {
-        return Err(ApiError::bad_request(
-            "malformed-record",
-            "Malformed record",
-            "raw f32 samples carry no sample rate: add `?sample_rate_hz=…` to the URL",
-        ));
-    }
     let opts = ReadOptions {
         format: Some(f),
         sample_rate,
@@ -329,6 +334,19 @@ pub struct Decoded {
     pub sensor: Option<String>,
 }
 
+fn too_many_samples(samples: usize, limit: usize) -> ApiError {
+    ApiError::new(
+        StatusCode::PAYLOAD_TOO_LARGE,
+        "too-many-samples",
+        "Record too long",
+        format!(
+            "the record has {samples} samples; the limit is {limit} — split it into shorter records"
+        ),
+    )
+    .with("limit_samples", limit as u64)
+    .with("samples", samples as u64)
+}
+
 /// Decode and validate a record body of `format` (JSON body fields win over the query),
 /// the same for every endpoint that takes a record.
 pub fn decode(
@@ -369,6 +387,10 @@ pub fn decode(
             }
             (r.samples, r.sample_rate_hz)
         }
+        BodyFormat::F32 if bytes.len() / 4 > limits.max_samples => {
+            // Refused before decoding: no vector of more samples than allowed is built.
+            return Err(too_many_samples(bytes.len() / 4, limits.max_samples));
+        }
         f => decode_binary(f, bytes, parse_number("sample_rate_hz", &q.sample_rate_hz)?)?,
     };
     if let Some(t) = &recorded_at
@@ -392,42 +414,13 @@ pub fn decode(
         ));
     }
     if samples.len() > limits.max_samples {
-        return Err(ApiError::new(
-            StatusCode::PAYLOAD_TOO_LARGE,
-            "too-many-samples",
-            "Record too long",
-            format!(
-                "the record has {} samples; the limit is {} — split it into shorter records",
-                samples.len(),
-                limits.max_samples
-            ),
-        )
-        .with("limit_samples", limits.max_samples as u64)
-        .with("samples", samples.len() as u64));
+        return Err(too_many_samples(samples.len(), limits.max_samples));
     }
-    if samples.is_empty() {
-        return Err(ApiError::unprocessable(
-            "empty-record",
-            "Empty record",
-            "the record holds no samples; send at least one second of signal",
-        ));
-    }
-    if let Some((index, v)) = samples.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-        return Err(ApiError::unprocessable(
-            "non-finite-sample",
-            "Non-finite sample",
-            format!("sample {index} is {v}; every sample must be a finite number (check the sensor for dropouts or saturation)"),
-        )
-        .with("index", index as u64));
-    }
-    // The binary formats check the rate in `parse_record`; a JSON body's is checked here, so
-    // that every decoded record has one (same problem as the diagnosis would give, earlier).
-    if !(fs.is_finite() && fs > 0.0) {
-        return Err(problem_from_error(&crate::Error::param(
-            "sample rate",
-            fs,
-            "must be a positive number of samples per second",
-        )));
+    // Empty, NaN/±∞, flat or clipped samples and an impossible rate: the library's checks
+    // (the binary formats already passed them in `parse_record`; a JSON body has not).
+    if format == BodyFormat::Json {
+        crate::record::check_signal(&samples).map_err(|e| problem_from_error(&e))?;
+        crate::record::check_sample_rate(fs).map_err(|e| problem_from_error(&e))?;
     }
 
     Ok(Decoded {

@@ -241,8 +241,8 @@ async fn calibration_scopes_and_bad_input(b: Backend) {
             admin(app.client.post(&url))
                 .header("content-type", "application/octet-stream")
                 .body(vec![0u8; 64]),
-            400,
-            "malformed-record",
+            422,
+            "missing-sample-rate",
         ),
         (
             admin(app.client.post(&url)).json(&json!({"sample_rate_hz": 16000.0, "samples": []})),

@@ -1038,7 +1038,9 @@ async fn settle(
             s => panic!("ingest answered {s} during the fault: {a:?}"),
         }
     }
-    let stored_before_resend = count(real_url, "SELECT COUNT(*) FROM records").await;
+    // A request answered 503 by its timeout may still sit in the group-commit queue and be
+    // committed once the database answers again: wait until the count stops moving.
+    let stored_before_resend = stable_count(real_url, "SELECT COUNT(*) FROM records").await;
     let before = created.len();
     let mut replays = 0;
     for (k, seed) in &failed {
@@ -1071,9 +1073,142 @@ async fn settle(
     (failed.len(), replays)
 }
 
+/// [`count`] once it reads the same twice, 500 ms apart (at most 30 s).
+async fn stable_count(url: &str, sql: &'static str) -> i64 {
+    let mut last = count(url, sql).await;
+    for _ in 0..60 {
+        tokio::time::sleep(Duration::from_millis(500)).await;
+        let n = count(url, sql).await;
+        if n == last {
+            return n;
+        }
+        last = n;
+    }
+    last
+}
+
 async fn count(url: &str, sql: &'static str) -> i64 {
     let pool = sqlx::PgPool::connect(url).await.unwrap();
     let n: (i64,) = sqlx::query_as(sql).fetch_one(&pool).await.unwrap();
     pool.close().await;
     n.0
+}
+
+// ---------------------------------------------------------------------------------------------
+// SIGTERM with a request in flight: graceful shutdown finishes it
+// ---------------------------------------------------------------------------------------------
+
+/// SIGTERM to the real binary while a record upload is half sent: the service stops taking new
+/// connections, still reads the rest of the upload, diagnoses it, commits it, answers 201, and
+/// only then exits 0; after a restart the record is there.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn sigterm_finishes_the_request_in_flight() {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let dir = std::env::temp_dir().join(format!("gearwear-term-{}", uuid::Uuid::new_v4().simple()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let db = dir.join("term.db").display().to_string();
+    let log = dir.join("serve.log");
+    let out = gearwear()
+        .args([
+            "keys",
+            "create",
+            "--scope",
+            "ingest,read",
+            "--database-url",
+            &db,
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let key = String::from_utf8(out.stdout).unwrap().trim().to_string();
+    let client = reqwest::Client::builder()
+        .pool_max_idle_per_host(0)
+        .timeout(Duration::from_secs(30))
+        .build()
+        .unwrap();
+    let mut server = start_server(&db, &log, &client).await;
+    let addr = server.base.trim_start_matches("http://").to_string();
+
+    // Half of the upload.
+    let body = f32_body(1);
+    let (first, rest) = body.split_at(body.len() / 2);
+    let mut conn = tokio::net::TcpStream::connect(&addr).await.unwrap();
+    let head = format!(
+        "POST /v1/machines/term/records?sample_rate_hz=25600 HTTP/1.1\r\nHost: {addr}\r\n\
+         Authorization: Bearer {key}\r\nContent-Type: application/octet-stream\r\n\
+         Content-Length: {}\r\nConnection: close\r\n\r\n",
+        body.len()
+    );
+    conn.write_all(head.as_bytes()).await.unwrap();
+    conn.write_all(first).await.unwrap();
+    conn.flush().await.unwrap();
+    tokio::time::sleep(Duration::from_millis(200)).await;
+
+    // SIGTERM, then the rest of the upload after the service has begun shutting down.
+    let pid = server.child.id().to_string();
+    assert!(
+        Command::new("kill")
+            .args(["-TERM", &pid])
+            .status()
+            .unwrap()
+            .success()
+    );
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    assert!(
+        server.child.try_wait().unwrap().is_none(),
+        "the service exited with a request in flight; log:\n{}",
+        std::fs::read_to_string(&log).unwrap_or_default()
+    );
+    // New requests are no longer taken.
+    let late = client
+        .get(format!("{}/healthz", server.base))
+        .timeout(Duration::from_secs(2))
+        .send()
+        .await;
+    assert!(
+        late.is_err(),
+        "a new request was served during shutdown: {late:?}"
+    );
+    conn.write_all(rest).await.unwrap();
+    conn.flush().await.unwrap();
+    let mut answer = Vec::new();
+    tokio::time::timeout(Duration::from_secs(30), conn.read_to_end(&mut answer))
+        .await
+        .expect("the in-flight request was answered")
+        .unwrap();
+    let answer = String::from_utf8_lossy(&answer);
+    assert!(
+        answer.starts_with("HTTP/1.1 201"),
+        "in-flight request: {}",
+        answer.lines().next().unwrap_or("")
+    );
+
+    // Then the process exits, cleanly.
+    let started = Instant::now();
+    let status = loop {
+        if let Some(s) = server.child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(20),
+            "the service did not exit after its last request"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    };
+    assert!(status.success(), "exit status {status}");
+
+    // The acknowledged record is stored.
+    let mut again = start_server(&db, &log, &client).await;
+    let m: Value = client
+        .get(format!("{}/v1/machines/term", again.base))
+        .bearer_auth(&key)
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(m["record_count"], 1, "{m}");
+    kill9(&mut again);
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -4,6 +4,7 @@
 mod helpers;
 
 mod api;
+mod bad_records;
 mod browser;
 mod calibration;
 mod cli;
