@@ -106,7 +106,9 @@ pub fn split_token(token: &str) -> Option<(&str, &str)> {
     (id_ok && !secret.is_empty() && secret.len() <= 128).then_some((id, secret))
 }
 
-/// Constant-time comparison of a presented secret against a stored hash.
+/// Constant-time comparison of a presented secret against a stored hash: both sides are
+/// 64 hex digits (the length is public), compared with [`subtle::ConstantTimeEq`], which
+/// looks at every byte whatever the first difference.
 pub fn verify(secret: &str, stored_hash: &str) -> bool {
     let h = hash_secret(secret);
     h.as_bytes().ct_eq(stored_hash.as_bytes()).into()
@@ -149,6 +151,29 @@ mod tests {
         assert!(!verify("nope", &k.hash));
         assert!(split_token("Bearer x").is_none());
         assert!(split_token("gw_zz_abc").is_none());
+    }
+
+    #[test]
+    fn verify_accepts_the_secret_and_rejects_a_near_miss() {
+        let k = generate();
+        let (_, secret) = split_token(&k.token).unwrap();
+        assert!(verify(secret, &k.hash));
+        // The same secret with only its last byte changed.
+        let mut near = secret.as_bytes().to_vec();
+        let last = near.len() - 1;
+        near[last] = if near[last] == b'A' { b'B' } else { b'A' };
+        let near = String::from_utf8(near).unwrap();
+        assert_ne!(near, secret);
+        assert!(!verify(&near, &k.hash));
+        // A prefix, an extension, the stored hash itself and the empty string: all refused.
+        assert!(!verify(&secret[..secret.len() - 1], &k.hash));
+        assert!(!verify(&format!("{secret}A"), &k.hash));
+        assert!(!verify(&k.hash, &k.hash));
+        assert!(!verify("", &k.hash));
+        // What is stored is the SHA-256, never the secret.
+        assert_ne!(k.hash, secret);
+        assert!(!k.hash.contains(secret));
+        assert_eq!(k.hash.len(), 64);
     }
 
     #[test]

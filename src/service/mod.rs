@@ -73,6 +73,8 @@ impl AppState {
             auth::RateLimiter::new(settings.limits.rate_per_second, settings.limits.rate_burst);
         let http = reqwest::Client::builder()
             .redirect(reqwest::redirect::Policy::none())
+            // Webhook hosts given by name must not resolve to metadata/link-local addresses.
+            .dns_resolver(webhooks::GuardedResolver)
             .build()
             .expect("HTTP client");
         let ingest_queue = crate::store::queue::IngestQueue::start(store.clone(), INGEST_BATCH);
@@ -126,8 +128,15 @@ pub fn router(state: AppState) -> Router {
         .method_not_allowed_fallback(method_not_allowed)
         .layer(middleware::from_fn_with_state(state.clone(), observe))
         .layer(TraceLayer::new_for_http().make_span_with(|req: &Request| {
-            // Method and path only: never headers (they carry keys).
-            tracing::info_span!("http", method = %req.method(), path = %req.uri().path())
+            // Method and path only: never headers (they carry keys). `key_id` is filled in
+            // once a key is verified (auth.rs): the id names the caller, the secret never
+            // leaves the request.
+            tracing::info_span!(
+                "http",
+                method = %req.method(),
+                path = %req.uri().path(),
+                key_id = tracing::field::Empty
+            )
         }))
         .with_state(state)
 }

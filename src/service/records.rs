@@ -618,7 +618,7 @@ async fn ingest(
     }
     app.metrics.records_accepted.fetch_add(1, Ordering::Relaxed);
     app.webhook_wake.notify_one();
-    tracing::info!(machine = machine_id, diagnosis = %diagnosis_id, ea = out.ea_estimate, level, "record accepted");
+    tracing::info!(machine = machine_id, diagnosis = %diagnosis_id, ea = out.ea_estimate, alert_level = level, "record accepted");
     let mut r = (StatusCode::CREATED, response_text).into_response();
     let h = r.headers_mut();
     h.insert(

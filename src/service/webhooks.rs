@@ -38,6 +38,109 @@ struct NewWebhook {
     events: Vec<String>,
 }
 
+/// What webhook URLs may point at, for the messages.
+const ALLOWED: &str = "webhooks may go to public, private (10.0.0.0/8, 172.16.0.0/12, \
+                       192.168.0.0/16, fc00::/7) or loopback addresses, not to link-local, \
+                       cloud-metadata or unspecified ones";
+
+/// A webhook URL the service will POST to: absolute `http`/`https` with a host, at most 2048
+/// characters, and not aimed at a link-local, cloud-metadata or unspecified address (the
+/// worker must not become a way to read a cloud instance's credentials). Hosts given by name
+/// are checked again when they are resolved, at each delivery ([`GuardedResolver`]).
+/// `Err` is a message for the caller.
+pub fn check_url(raw: &str) -> Result<reqwest::Url, String> {
+    if raw.len() > 2048 {
+        return Err(format!(
+            "`url` is {} characters long; at most 2048 are accepted",
+            raw.len()
+        ));
+    }
+    let shown: String = raw.chars().take(200).collect();
+    let u = reqwest::Url::parse(raw).map_err(|e| {
+        format!("`url` must be an absolute http(s) URL such as https://cmms.example/hooks/wear, got `{shown}` ({e})")
+    })?;
+    if !matches!(u.scheme(), "http" | "https") {
+        return Err(format!(
+            "`url` must use http:// or https://, got the scheme `{}` in `{shown}`",
+            u.scheme()
+        ));
+    }
+    let Some(host) = u.host_str().filter(|h| !h.is_empty()) else {
+        return Err(format!("`url` has no host: `{shown}`"));
+    };
+    // The URL parser has already normalised IPv4 spellings (decimal, hex, octal) to
+    // dotted quads, and IPv6 literals come in brackets.
+    let literal = host.trim_start_matches('[').trim_end_matches(']');
+    if let Ok(ip) = literal.parse::<std::net::IpAddr>()
+        && let Some(why) = refused_ip(ip)
+    {
+        return Err(format!("`url` points at {ip}, {why}; {ALLOWED}"));
+    }
+    Ok(u)
+}
+
+/// Why a webhook may not connect to `ip`, or `None` if it may. Link-local (169.254.0.0/16,
+/// fe80::/10: where cloud metadata services answer), two metadata addresses outside it
+/// (Alibaba's 100.100.100.200, AWS's IPv6 fd00:ec2::254), unspecified (0.0.0.0, ::) and the
+/// IPv4 broadcast address; IPv4-mapped IPv6 addresses are judged as their IPv4 address.
+/// Loopback and private addresses stay allowed (tests and plants use them).
+pub fn refused_ip(ip: std::net::IpAddr) -> Option<&'static str> {
+    use std::net::{IpAddr, Ipv4Addr, Ipv6Addr};
+    let ip = match ip {
+        IpAddr::V6(v6) => v6.to_ipv4_mapped().map(IpAddr::V4).unwrap_or(ip),
+        v4 => v4,
+    };
+    match ip {
+        IpAddr::V4(a) if a.is_unspecified() => Some("the unspecified address"),
+        IpAddr::V4(a) if a.is_broadcast() => Some("the broadcast address"),
+        IpAddr::V4(a) if a.is_link_local() => {
+            Some("a link-local address (169.254.0.0/16, where cloud instance metadata answers)")
+        }
+        IpAddr::V4(a) if a == Ipv4Addr::new(100, 100, 100, 200) => {
+            Some("a cloud instance-metadata address")
+        }
+        IpAddr::V6(a) if a.is_unspecified() => Some("the unspecified address"),
+        IpAddr::V6(a) if (a.segments()[0] & 0xffc0) == 0xfe80 => {
+            Some("a link-local address (fe80::/10)")
+        }
+        IpAddr::V6(a) if a == Ipv6Addr::new(0xfd00, 0xec2, 0, 0, 0, 0, 0, 0x254) => {
+            Some("a cloud instance-metadata address")
+        }
+        _ => None,
+    }
+}
+
+/// DNS for webhook deliveries: the system resolver, minus the addresses [`refused_ip`]
+/// refuses, so a name that resolves to a metadata address (now or after a DNS change) is not
+/// connected to either. A name that resolves only to refused addresses fails the attempt
+/// with a message saying so.
+pub struct GuardedResolver;
+
+impl reqwest::dns::Resolve for GuardedResolver {
+    fn resolve(&self, name: reqwest::dns::Name) -> reqwest::dns::Resolving {
+        Box::pin(resolve_guarded(name.as_str().to_string()))
+    }
+}
+
+async fn resolve_guarded(
+    host: String,
+) -> Result<reqwest::dns::Addrs, Box<dyn std::error::Error + Send + Sync>> {
+    let all: Vec<std::net::SocketAddr> =
+        tokio::net::lookup_host((host.as_str(), 0)).await?.collect();
+    let ok: Vec<std::net::SocketAddr> = all
+        .iter()
+        .copied()
+        .filter(|a| refused_ip(a.ip()).is_none())
+        .collect();
+    if ok.is_empty()
+        && let Some(first) = all.first()
+    {
+        let why = refused_ip(first.ip()).unwrap_or("refused");
+        return Err(format!("`{host}` resolves to {}, {why}; {ALLOWED}", first.ip()).into());
+    }
+    Ok(Box::new(ok.into_iter()))
+}
+
 fn webhook_json(w: &WebhookRow) -> Value {
     json!({"id": w.id, "url": w.url, "events": w.events, "created_at": rfc3339(w.created_at)})
 }
@@ -57,14 +160,11 @@ pub async fn create(
             format!("{e}; expected {{\"url\": \"https://…\", \"events\": [\"diagnosis.created\", \"wear.threshold_crossed\"]}}"),
         )
     })?;
-    let url_ok = (n.url.starts_with("https://") || n.url.starts_with("http://"))
-        && n.url.len() <= 2048
-        && reqwest::Url::parse(&n.url).is_ok();
-    if !url_ok {
+    if let Err(why) = check_url(&n.url) {
         return Err(ApiError::unprocessable(
             "invalid-webhook",
             "Invalid webhook",
-            format!("`url` must be an absolute http(s) URL, got `{}`", n.url),
+            why,
         ));
     }
     if n.events.is_empty() || n.events.iter().any(|e| !EVENTS.contains(&e.as_str())) {
@@ -210,31 +310,39 @@ async fn deliver(app: &AppState, d: &DeliveryRow, w: &WebhookRow) {
     let t = now_ms() / 1000;
     let sig = keys::sign_webhook(&w.secret, t, d.payload.as_bytes());
     let started = Instant::now();
-    let res = app
-        .http
-        .post(&w.url)
-        .timeout(ws.timeout)
-        .header("content-type", "application/json")
-        .header(
-            "user-agent",
-            concat!("gearwear/", env!("CARGO_PKG_VERSION")),
-        )
-        .header("gearwear-event", &d.event)
-        .header("gearwear-delivery", &d.id)
-        .header("gearwear-signature", sig)
-        .body(d.payload.clone())
-        .send()
-        .await;
-    let attempt = d.attempts + 1;
-    let (code, error) = match &res {
-        Ok(r) => (Some(r.status().as_u16() as i64), None),
-        Err(e) => (None, Some(error_chain(e))),
+    // A subscription made before the URL rules (or written to the store by hand) is checked
+    // again here; a refused URL fails at once, retrying cannot help.
+    let refused = check_url(&w.url).err();
+    let (code, error) = match &refused {
+        Some(why) => (None, Some(why.clone())),
+        None => {
+            let res = app
+                .http
+                .post(&w.url)
+                .timeout(ws.timeout)
+                .header("content-type", "application/json")
+                .header(
+                    "user-agent",
+                    concat!("gearwear/", env!("CARGO_PKG_VERSION")),
+                )
+                .header("gearwear-event", &d.event)
+                .header("gearwear-delivery", &d.id)
+                .header("gearwear-signature", sig)
+                .body(d.payload.clone())
+                .send()
+                .await;
+            match &res {
+                Ok(r) => (Some(r.status().as_u16() as i64), None),
+                Err(e) => (None, Some(error_chain(e))),
+            }
+        }
     };
+    let attempt = d.attempts + 1;
     let ok = code.is_some_and(|c| (200..300).contains(&c));
     let now = now_ms();
     let outcome = if ok {
         Outcome::Delivered
-    } else if attempt >= ws.max_attempts {
+    } else if attempt >= ws.max_attempts || refused.is_some() {
         Outcome::Failed
     } else {
         Outcome::Retry {
@@ -264,6 +372,46 @@ async fn deliver(app: &AppState, d: &DeliveryRow, w: &WebhookRow) {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn webhook_urls_refuse_metadata_and_link_local_only() {
+        use super::check_url;
+        for ok in [
+            "http://127.0.0.1:8081/hook",
+            "http://[::1]:9/hook",
+            "http://localhost:9/hook",
+            "http://10.1.2.3/hook",
+            "http://172.16.0.1/hook",
+            "http://192.168.0.10:8080/hook",
+            "http://[fd12:3456::1]/hook",
+            "https://cmms.example.com/hooks/wear?x=1",
+            "http://169.255.0.1/",
+        ] {
+            assert!(check_url(ok).is_ok(), "{ok}: {:?}", check_url(ok));
+        }
+        for (bad, says) in [
+            ("ftp://x/y", "http:// or https://"),
+            ("file:///etc/passwd", "http:// or https://"),
+            ("hook", "absolute"),
+            ("http://169.254.169.254/latest/meta-data/", "link-local"),
+            ("http://169.254.0.1:8080/", "link-local"),
+            // The same address spelt as one decimal number and in hex.
+            ("http://2852039166/", "link-local"),
+            ("http://0xa9fea9fe/", "link-local"),
+            ("http://[::ffff:169.254.169.254]/", "link-local"),
+            ("http://[fe80::1]/hook", "link-local"),
+            ("http://[febf::1]/hook", "link-local"),
+            ("http://0.0.0.0:8080/", "unspecified"),
+            ("http://[::]:8080/", "unspecified"),
+            ("http://255.255.255.255/", "broadcast"),
+            ("http://100.100.100.200/", "metadata"),
+            ("http://[fd00:ec2::254]/", "metadata"),
+        ] {
+            let e = check_url(bad).unwrap_err();
+            assert!(e.contains(says), "{bad}: {e}");
+        }
+        assert!(check_url(&format!("https://x.example/{}", "a".repeat(2100))).is_err());
+    }
+
     #[test]
     fn backoff_doubles_and_caps() {
         use std::time::Duration;

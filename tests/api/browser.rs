@@ -75,8 +75,9 @@ impl Drop for Driver {
     }
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn dashboard_updates_when_a_record_arrives() {
+/// chromedriver + a headless Chromium session; `None` (after saying why) when they are not
+/// installed and `CI` is not set.
+async fn start_driver() -> Option<(Driver, PathBuf)> {
     let (Some(chromium), Some(chromedriver)) = (
         find(&["chromium", "chromium-browser"]),
         find(&["chromedriver"]),
@@ -86,10 +87,7 @@ async fn dashboard_updates_when_a_record_arrives() {
             panic!("{msg} (CI is set, so this is a failure)");
         }
         eprintln!("SKIP: {msg}");
-        return;
-    };
-    let Some(app) = spawn_app(Backend::Sqlite, |s| s.open_dashboard = true).await else {
-        return;
+        return None;
     };
     let port = std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
@@ -144,6 +142,17 @@ async fn dashboard_updates_when_a_record_arrives() {
         http,
     };
 
+    Some((d, profile))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn dashboard_updates_when_a_record_arrives() {
+    let Some(app) = spawn_app(Backend::Sqlite, |s| s.open_dashboard = true).await else {
+        return;
+    };
+    let Some((d, profile)) = start_driver().await else {
+        return;
+    };
     d.cmd(
         reqwest::Method::POST,
         "/url",
@@ -224,6 +233,86 @@ async fn dashboard_updates_when_a_record_arrives() {
     let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("dashboard.png");
     std::fs::write(&out, png).unwrap();
     eprintln!("dashboard screenshot: {}", out.display());
+    d.cmd(reqwest::Method::DELETE, "", None).await;
+    let _ = std::fs::remove_dir_all(&profile);
+}
+
+/// Reads need a key (no `--open-dashboard`): the page asks for one on the 401, keeps it in
+/// sessionStorage (not localStorage), sends it, and shows the machines; a wrong key is asked
+/// for again.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn dashboard_asks_for_a_read_key() {
+    let Some(app) = spawn_app(Backend::Sqlite, |_| {}).await else {
+        return;
+    };
+    let Some((d, profile)) = start_driver().await else {
+        return;
+    };
+    assert_eq!(
+        app.post_json("gearbox-k", &json_record(3)).await.status(),
+        201
+    );
+    d.cmd(
+        reqwest::Method::POST,
+        "/url",
+        Some(json!({"url": app.url("/")})),
+    )
+    .await;
+    d.wait_for(
+        "the key prompt",
+        "return !document.getElementById('keyform').hidden",
+    )
+    .await;
+    let status = d
+        .script("return document.getElementById('status').textContent")
+        .await;
+    assert!(
+        status.as_str().unwrap().contains("read"),
+        "the page says a read key is needed: {status}"
+    );
+    let submit = |key: &str| {
+        format!(
+            "document.getElementById('key').value = {}; \
+             document.getElementById('keyform').requestSubmit(); return true",
+            json!(key)
+        )
+    };
+    // A wrong key: refused, asked for again, not kept.
+    d.script(&submit("gw_0123456789abcdef_nope")).await;
+    d.wait_for(
+        "the prompt again after a wrong key",
+        "return !document.getElementById('keyform').hidden && \
+         sessionStorage.getItem('gearwear-key') === null",
+    )
+    .await;
+    // The read key: the machines appear, the key is in sessionStorage only.
+    d.script(&submit(&app.read_key)).await;
+    d.wait_for(
+        "the machine after the key",
+        "return document.querySelector('#machines li[data-id=\"gearbox-k\"]') !== null",
+    )
+    .await;
+    assert_eq!(
+        d.script("return sessionStorage.getItem('gearwear-key')")
+            .await,
+        json!(app.read_key)
+    );
+    assert_eq!(
+        d.script("return localStorage.getItem('gearwear-key')")
+            .await,
+        Value::Null
+    );
+    assert_eq!(
+        d.script("return document.getElementById('keyform').hidden")
+            .await,
+        json!(true)
+    );
+    assert_eq!(
+        d.script("return document.getElementById('key').value")
+            .await,
+        json!(""),
+        "the field does not keep the key"
+    );
     d.cmd(reqwest::Method::DELETE, "", None).await;
     let _ = std::fs::remove_dir_all(&profile);
 }

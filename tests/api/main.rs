@@ -10,5 +10,6 @@ mod calibration;
 mod cli;
 mod faults;
 mod openapi;
+mod security;
 mod store;
 mod webhooks;

@@ -5,13 +5,18 @@ let selected = null;
 const $ = (id) => document.getElementById(id);
 const NS = "http://www.w3.org/2000/svg";
 
-function key() { return localStorage.getItem("gearwear-key") || ""; }
+// The read key lives in sessionStorage: it is gone when the tab closes, and never written
+// to disk the way localStorage is. (Earlier versions used localStorage: clear that copy.)
+try { localStorage.removeItem("gearwear-key"); } catch (_) { /* storage disabled */ }
+function key() { return sessionStorage.getItem("gearwear-key") || ""; }
 
 async function api(path) {
   const headers = {};
   if (key()) headers["Authorization"] = "Bearer " + key();
   const r = await fetch(path, { headers, cache: "no-cache" });
   if (r.status === 401 || r.status === 403) {
+    // No key, a wrong or revoked one (401), or one without the read scope (403): ask.
+    if (r.status === 401) sessionStorage.removeItem("gearwear-key");
     $("keyform").hidden = false;
     const p = await r.json().catch(() => ({}));
     throw new Error(p.detail || "a read key is needed");
@@ -152,7 +157,8 @@ async function refresh() {
 
 $("keyform").addEventListener("submit", (ev) => {
   ev.preventDefault();
-  localStorage.setItem("gearwear-key", $("key").value.trim());
+  sessionStorage.setItem("gearwear-key", $("key").value.trim());
+  $("key").value = "";
   $("keyform").hidden = true;
   refresh();
 });
