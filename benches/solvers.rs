@@ -1,6 +1,6 @@
 //! Our DOPRI5 against well-kept crates on the same gear model.
 //!
-//! `cargo bench --bench solvers` (harness = false) prints three tables:
+//! `cargo bench --features compare-solvers --bench solvers` (harness = false) prints three tables:
 //!
 //! 1. **Work–precision on a single mesh with backlash** against the exact piecewise closed-form
 //!    solution (the same reference as `tests/physics.rs`): max error of x over τ ∈ [0, 60]

@@ -4,8 +4,8 @@
 //! 20 kHz), measured against DOPRI5 at rtol 1e-11, atol 1e-13.
 //!
 //! ```text
-//! CARGO_TARGET_DIR=/work/target-modelb2 cargo bench --bench stiff            # full table
-//! CARGO_TARGET_DIR=/work/target-modelb2 cargo bench --bench stiff -- --quick # 1 repetition
+//! CARGO_TARGET_DIR=/work/target-modelb2 cargo bench --features compare-solvers --bench stiff            # full table
+//! CARGO_TARGET_DIR=/work/target-modelb2 cargo bench --features compare-solvers --bench stiff -- --quick # 1 repetition
 //! ```
 //!
 //! diffsol gets the model through `OdeBuilder::rhs_implicit`: the right-hand side is
