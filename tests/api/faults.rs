@@ -245,6 +245,27 @@ async fn start_server(db_url: &str, log: &Path, client: &reqwest::Client) -> Ser
     );
 }
 
+/// An ingest+read key made by `gearwear keys create`, as an operator would.
+fn cli_key(db_url: &str) -> String {
+    let out = gearwear()
+        .args([
+            "keys",
+            "create",
+            "--scope",
+            "ingest,read",
+            "--database-url",
+            db_url,
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap().trim().to_string()
+}
+
 /// SIGKILL (`Child::kill` is SIGKILL on Unix) and reap.
 fn kill9(s: &mut Server) {
     s.child.kill().expect("SIGKILL");
@@ -320,23 +341,7 @@ async fn kill9_run(db_url: &str, b: Backend, plan: &Kill9Plan) -> Kill9Figures {
         .collect();
 
     // The key: the binary, as an operator would.
-    let out = gearwear()
-        .args([
-            "keys",
-            "create",
-            "--scope",
-            "ingest,read",
-            "--database-url",
-            db_url,
-        ])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let key = String::from_utf8(out.stdout).unwrap().trim().to_string();
+    let key = cli_key(db_url);
 
     // No pooled connections and a timeout: a hung request fails the run instead of hanging it.
     let client = reqwest::Client::builder()
@@ -1108,19 +1113,7 @@ async fn sigterm_finishes_the_request_in_flight() {
     std::fs::create_dir_all(&dir).unwrap();
     let db = dir.join("term.db").display().to_string();
     let log = dir.join("serve.log");
-    let out = gearwear()
-        .args([
-            "keys",
-            "create",
-            "--scope",
-            "ingest,read",
-            "--database-url",
-            &db,
-        ])
-        .output()
-        .unwrap();
-    assert!(out.status.success());
-    let key = String::from_utf8(out.stdout).unwrap().trim().to_string();
+    let key = cli_key(&db);
     let client = reqwest::Client::builder()
         .pool_max_idle_per_host(0)
         .timeout(Duration::from_secs(30))
