@@ -48,43 +48,16 @@ if ! "$venv/bin/st" --version 2>/dev/null | grep -q "$ST_VERSION"; then
 fi
 
 cargo build --release --quiet --bin gearwear
-B=target/release/gearwear
+. scripts/lib/serve.sh
 out=target/schemathesis
 rm -rf "$out" && mkdir -p "$out"
-dir=$(mktemp -d /tmp/gearwear-st.XXXXXX)
-port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
-case "$store" in
-  sqlite) db="$dir/st.db" ;;
-  postgres)
-    name="gw_st_$(date +%s)_$$"
-    psql -q -h 127.0.0.1 -U postgres -d test -c "CREATE DATABASE $name" >/dev/null
-    db="postgres://postgres@127.0.0.1:5432/$name" ;;
-  *) echo "--store is sqlite or postgres" >&2; exit 2 ;;
-esac
-newkey() { $B keys create --scope "$1" --database-url "$db" 2>/dev/null | grep -o 'gw_[A-Za-z0-9_-]*' | head -1; }
-admin=$(newkey admin)
-read=$(newkey read)
+gw_fresh_store "$store" st
+trap gw_cleanup EXIT
+admin=$(gw_key admin)
+read=$(gw_key read)
 bogus="gw_0123456789abcdef_$(printf 'x%.0s' $(seq 43))"
-
-# Rate limits high enough for the fuzzer (the limiter itself is tested in tests/api); request
-# timeout 30 s (a valid calibration runs simulations).
-$B serve --address "127.0.0.1:$port" --database-url "$db" \
-  --rate-per-second 100000 --rate-burst 100000 >"$out/server.log" 2>&1 &
-pid=$!
-cleanup() {
-  kill "$pid" 2>/dev/null || true
-  wait "$pid" 2>/dev/null || true
-  if [ "$store" = postgres ]; then
-    psql -q -h 127.0.0.1 -U postgres -d test -c "DROP DATABASE IF EXISTS $name WITH (FORCE)" >/dev/null || true
-  fi
-  rm -rf "$dir"
-}
-trap cleanup EXIT
-for _ in $(seq 150); do
-  curl -fs "http://127.0.0.1:$port/readyz" >/dev/null 2>&1 && break
-  sleep 0.2
-done
-curl -fs "http://127.0.0.1:$port/readyz" >/dev/null || { echo "server did not start:"; cat "$out/server.log"; exit 1; }
+gw_serve "$out/server.log"
+pid=$GW_PID port=$GW_PORT
 echo "schemathesis $ST_VERSION, $mode, store $store, server pid $pid on port $port, $(date -u +%FT%TZ)"
 
 status=0

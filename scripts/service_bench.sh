@@ -14,19 +14,19 @@
 # turn, twice, on an otherwise idle machine (the load generator shares the two cores).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-B=${1:-target/release/gearwear}
+GW_BIN=${1:-target/release/gearwear}
+B=$GW_BIN
 label=${2:-this}
 cargo build --release --quiet --bin gearwear --example loadgen
 LG=target/release/examples/loadgen
-d=$(mktemp -d /tmp/gearwear-bench.XXXXXX)
-target/release/gearwear synth --ea 0.5 --output "$d/model.wav" >/dev/null
-key=$("$B" keys create --scope ingest,read --database-url "$d/p.db" 2>/dev/null | tail -1)
-port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
-"$B" serve --address "127.0.0.1:$port" --database-url "$d/p.db" --rate-per-second 100000 \
-  --rate-burst 100000 --allow-stale-table >"$d/serve.log" 2>&1 &
-pid=$!
-trap 'kill $pid 2>/dev/null; wait $pid 2>/dev/null; rm -rf "$d"' EXIT
-for _ in $(seq 100); do curl -fs "http://127.0.0.1:$port/readyz" >/dev/null 2>&1 && break; sleep 0.1; done
+. scripts/lib/serve.sh
+gw_fresh_store sqlite bench
+trap gw_cleanup EXIT
+target/release/gearwear synth --ea 0.5 --output "$GW_DIR/model.wav" >/dev/null
+key=$(gw_key ingest,read)
+gw_serve "$GW_DIR/serve.log" --allow-stale-table
+pid=$GW_PID port=$GW_PORT
+d=$GW_DIR
 echo "# $label: $B, $(date -u +%FT%TZ), load average $(cut -d' ' -f1-3 /proc/loadavg)"
 for rec in model four; do
   for fmt in json f32; do

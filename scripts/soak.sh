@@ -29,35 +29,13 @@ while [ $# -gt 0 ]; do
 done
 
 cargo build --release --quiet --bin gearwear --example loadgen
-B=target/release/gearwear
 LG=target/release/examples/loadgen
-dir=$(mktemp -d /tmp/gearwear-soak.XXXXXX)
-port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
-case "$store" in
-  sqlite) db="$dir/soak.db" ;;
-  postgres)
-    name="gw_soak_$(date +%s)_$$"
-    psql -q -h 127.0.0.1 -U postgres -d test -c "CREATE DATABASE $name" >/dev/null
-    db="postgres://postgres@127.0.0.1:5432/$name" ;;
-  *) echo "--store is sqlite or postgres" >&2; exit 2 ;;
-esac
-key=$($B keys create --scope ingest,read --database-url "$db" 2>/dev/null | grep -o 'gw_[A-Za-z0-9_-]*' | head -1)
-$B serve --address "127.0.0.1:$port" --database-url "$db" \
-  --rate-per-second 100000 --rate-burst 100000 >"$dir/serve.log" 2>&1 &
-pid=$!
-cleanup() {
-  kill "$pid" 2>/dev/null || true
-  wait "$pid" 2>/dev/null || true
-  if [ "$store" = postgres ]; then
-    psql -q -h 127.0.0.1 -U postgres -d test -c "DROP DATABASE IF EXISTS $name WITH (FORCE)" >/dev/null || true
-  fi
-  rm -rf "$dir"
-}
-trap cleanup EXIT
-for _ in $(seq 100); do
-  curl -fs "http://127.0.0.1:$port/readyz" >/dev/null 2>&1 && break
-  sleep 0.2
-done
+. scripts/lib/serve.sh
+gw_fresh_store "$store" soak
+trap gw_cleanup EXIT
+key=$(gw_key ingest,read)
+gw_serve "$GW_DIR/serve.log"
+pid=$GW_PID port=$GW_PORT
 echo "store $store, server pid $pid, port $port, $(date -u +%FT%TZ), load average $(cut -d' ' -f1-3 /proc/loadavg)"
 
 if [ -z "$rate" ]; then
