@@ -1,11 +1,7 @@
 //! The binary: `keys create|list|revoke`, and `serve` refusing a non-loopback address
 //! without keys.
 
-use std::process::Command;
-
-fn gw() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_gearwear"))
-}
+use crate::helpers::gearwear_bin;
 
 #[test]
 fn keys_are_printed_once_and_stored_hashed() {
@@ -15,7 +11,7 @@ fn keys_are_printed_once_and_stored_hashed() {
     let db = db.to_str().unwrap();
 
     // No key yet: a non-loopback address is refused.
-    let out = gw()
+    let out = gearwear_bin()
         .args(["serve", "--address", "0.0.0.0:0", "--database-url", db])
         .output()
         .unwrap();
@@ -26,7 +22,7 @@ fn keys_are_printed_once_and_stored_hashed() {
         "{err}"
     );
 
-    let out = gw()
+    let out = gearwear_bin()
         .args([
             "keys",
             "create",
@@ -56,7 +52,7 @@ fn keys_are_printed_once_and_stored_hashed() {
         );
     }
 
-    let out = gw()
+    let out = gearwear_bin()
         .args(["keys", "list", "--database-url", db])
         .output()
         .unwrap();
@@ -67,17 +63,17 @@ fn keys_are_printed_once_and_stored_hashed() {
     );
     assert!(!list.contains(secret));
 
-    let out = gw()
+    let out = gearwear_bin()
         .args(["keys", "revoke", id, "--database-url", db])
         .output()
         .unwrap();
     assert!(out.status.success());
-    let out = gw()
+    let out = gearwear_bin()
         .args(["keys", "revoke", id, "--database-url", db])
         .output()
         .unwrap();
     assert!(!out.status.success(), "revoking twice says so");
-    let out = gw()
+    let out = gearwear_bin()
         .args(["keys", "create", "--scope", "write", "--database-url", db])
         .output()
         .unwrap();

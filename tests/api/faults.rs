@@ -188,10 +188,6 @@ fn free_port() -> u16 {
         .port()
 }
 
-fn gearwear() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_gearwear"))
-}
-
 /// Start the binary on a free loopback port and wait for `/readyz`.
 async fn start_server(db_url: &str, log: &Path, client: &reqwest::Client) -> Server {
     for _ in 0..5 {
@@ -201,7 +197,7 @@ async fn start_server(db_url: &str, log: &Path, client: &reqwest::Client) -> Ser
             .append(true)
             .open(log)
             .unwrap();
-        let child = gearwear()
+        let child = gearwear_bin()
             .args([
                 "serve",
                 "--address",
@@ -243,27 +239,6 @@ async fn start_server(db_url: &str, log: &Path, client: &reqwest::Client) -> Ser
         "gearwear serve did not become ready; log:\n{}",
         std::fs::read_to_string(log).unwrap_or_default()
     );
-}
-
-/// An ingest+read key made by `gearwear keys create`, as an operator would.
-fn cli_key(db_url: &str) -> String {
-    let out = gearwear()
-        .args([
-            "keys",
-            "create",
-            "--scope",
-            "ingest,read",
-            "--database-url",
-            db_url,
-        ])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).unwrap().trim().to_string()
 }
 
 /// SIGKILL (`Child::kill` is SIGKILL on Unix) and reap.
@@ -341,7 +316,7 @@ async fn kill9_run(db_url: &str, b: Backend, plan: &Kill9Plan) -> Kill9Figures {
         .collect();
 
     // The key: the binary, as an operator would.
-    let key = cli_key(db_url);
+    let key = cli_key(db_url, "ingest,read");
 
     // No pooled connections and a timeout: a hung request fails the run instead of hanging it.
     let client = reqwest::Client::builder()
@@ -1113,7 +1088,7 @@ async fn sigterm_finishes_the_request_in_flight() {
     std::fs::create_dir_all(&dir).unwrap();
     let db = dir.join("term.db").display().to_string();
     let log = dir.join("serve.log");
-    let key = cli_key(&db);
+    let key = cli_key(&db, "ingest,read");
     let client = reqwest::Client::builder()
         .pool_max_idle_per_host(0)
         .timeout(Duration::from_secs(30))

@@ -12,6 +12,27 @@ use gearwear::store::{self, Store};
 use serde_json::Value;
 use tokio::sync::oneshot;
 
+/// The binary under test, run from the checkout (where the committed signature table is).
+pub fn gearwear_bin() -> std::process::Command {
+    let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_gearwear"));
+    c.current_dir(env!("CARGO_MANIFEST_DIR"));
+    c
+}
+
+/// `gearwear keys create --scope SCOPE --database-url URL`, as an operator runs it; the key.
+pub fn cli_key(db_url: &str, scope: &str) -> String {
+    let out = gearwear_bin()
+        .args(["keys", "create", "--scope", scope, "--database-url", db_url])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap().trim().to_string()
+}
+
 /// Which store a test runs against.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Backend {

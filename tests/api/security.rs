@@ -506,7 +506,7 @@ async fn keys_are_stored_hashed(b: Backend) {
     };
     let url = app.db.as_ref().unwrap().url.clone();
     // The real command, as an operator runs it.
-    let out = gw()
+    let out = gearwear_bin()
         .args([
             "keys",
             "create",
@@ -801,27 +801,6 @@ async fn chunked_post(addr: &str, path: &str, key: &str, len: usize) -> (u16, St
 
 // ---------- The real binary ----------
 
-fn gw() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_gearwear"));
-    // The committed signature table is found relative to the checkout.
-    c.current_dir(env!("CARGO_MANIFEST_DIR"));
-    c
-}
-
-/// `gearwear keys create --scope S` on a store; the key.
-fn create_key_cli(url: &str, scope: &str) -> String {
-    let out = gw()
-        .args(["keys", "create", "--scope", scope, "--database-url", url])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).unwrap().trim().to_string()
-}
-
 /// `gearwear serve …` with its stdout and stderr captured, line by line.
 struct Server {
     child: Child,
@@ -830,7 +809,7 @@ struct Server {
 
 impl Server {
     fn start(args: &[&str], envs: &[(&str, &str)]) -> Server {
-        let mut child = gw()
+        let mut child = gearwear_bin()
             .arg("serve")
             .args(args)
             .envs(envs.iter().copied())
@@ -923,12 +902,12 @@ async fn no_secret_in_the_logs(b: Backend) {
     let Some(db) = TestDb::new(b).await else {
         return;
     };
-    let ingest = create_key_cli(&db.url, "ingest");
-    let read = create_key_cli(&db.url, "read");
-    let admin = create_key_cli(&db.url, "admin");
-    let revoked = create_key_cli(&db.url, "ingest,read");
+    let ingest = cli_key(&db.url, "ingest");
+    let read = cli_key(&db.url, "read");
+    let admin = cli_key(&db.url, "admin");
+    let revoked = cli_key(&db.url, "ingest,read");
     let revoked_id = gearwear::keys::split_token(&revoked).unwrap().0.to_string();
-    let out = gw()
+    let out = gearwear_bin()
         .args([
             "keys",
             "revoke",
@@ -1281,7 +1260,7 @@ async fn non_loopback_address_needs_an_active_key(b: Backend) {
     refused("0.0.0.0:0").await;
     refused("[::]:0").await;
     // A key: it starts, answers on the port, and still wants keys.
-    let key = create_key_cli(&db.url, "read");
+    let key = cli_key(&db.url, "read");
     let mut s = Server::start(
         &[
             "--address",
@@ -1320,17 +1299,18 @@ async fn non_loopback_address_needs_an_active_key(b: Backend) {
     // Only a revoked key left: refused again.
     let id = gearwear::keys::split_token(&key).unwrap().0.to_string();
     assert!(
-        gw().args([
-            "keys",
-            "revoke",
-            id.as_str(),
-            "--database-url",
-            db.url.as_str()
-        ])
-        .output()
-        .unwrap()
-        .status
-        .success()
+        gearwear_bin()
+            .args([
+                "keys",
+                "revoke",
+                id.as_str(),
+                "--database-url",
+                db.url.as_str()
+            ])
+            .output()
+            .unwrap()
+            .status
+            .success()
     );
     refused("0.0.0.0:0").await;
 }
