@@ -405,18 +405,35 @@ impl Matcher {
     fn wear_log_likelihood(&self, yw: &[f64], corners: &[(usize, f64); 4], s0: f64) -> f64 {
         let nw = yw.len();
         let rows = corners.map(|(idx, _)| idx * nw);
-        let mut ll = 0.0;
-        for (q, &yq) in yw.iter().enumerate() {
-            let mut m = 0.0;
-            let mut v = 0.0;
-            for (r, &(_, wt)) in rows.iter().zip(corners) {
-                m += wt * self.wear_mean[r + q];
-                v += wt * self.wear_var[r + q];
+        // −½ Σ_q [(y_q − m_q)²/σ_q² + ln σ_q²], with ln of the product of up to eight σ² at a
+        // time instead of one ln per feature (the logarithm was the costliest step of the
+        // posterior): σ² ≥ s0 > 0, so a product of eight stays normal unless the variances are
+        // extreme, and then that group takes one ln per feature.
+        const GROUP: usize = 8;
+        let (mut chi2, mut ln_var) = (0.0, 0.0);
+        for (g, ys) in yw.chunks(GROUP).enumerate() {
+            let mut prod = 1.0;
+            let mut vars = [0.0; GROUP];
+            for (k, &yq) in ys.iter().enumerate() {
+                let q = g * GROUP + k;
+                let mut m = 0.0;
+                let mut v = 0.0;
+                for (r, &(_, wt)) in rows.iter().zip(corners) {
+                    m += wt * self.wear_mean[r + q];
+                    v += wt * self.wear_var[r + q];
+                }
+                let var = v + s0;
+                chi2 += (yq - m).powi(2) / var;
+                prod *= var;
+                vars[k] = var;
             }
-            let var = v + s0;
-            ll += -0.5 * (yq - m).powi(2) / var - 0.5 * var.ln();
+            ln_var += if prod.is_normal() {
+                prod.ln()
+            } else {
+                vars[..ys.len()].iter().map(|v| v.ln()).sum()
+            };
         }
-        ll
+        -0.5 * (chi2 + ln_var)
     }
 
     /// χ² of the clipped features `y` at `(ea, Ω1)` and the number of features in it.
@@ -1185,6 +1202,66 @@ mod tests {
                 w.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
                 assert_eq!(got[c], w[mid], "half {half} stride {stride} centre {c}");
                 c += stride;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod likelihood_tests {
+    use super::*;
+
+    /// The grouped logarithm of [`Matcher::wear_log_likelihood`] against one ln per feature
+    /// from [`Matcher::stats_at`], on the committed table, and with the table's variances
+    /// scaled by 1e-50 (and feature σ 1e-60) so that the products of eight underflow and the
+    /// per-feature fallback runs.
+    #[test]
+    fn grouped_log_likelihood_matches_per_feature_sum() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("signatures")
+            .join("model_a_accel.json");
+        let table = SignatureTable::load(&path).expect("committed table");
+        for sigma in [DiagnoseOptions::default().feature_sigma, 1e-60] {
+            let opts = DiagnoseOptions {
+                feature_sigma: sigma,
+                ..DiagnoseOptions::default()
+            };
+            let mut m = Matcher::new(&table, &opts).unwrap();
+            if sigma < 1e-30 {
+                m.wear_var.iter_mut().for_each(|v| *v *= 1e-50);
+                m.var.iter_mut().flatten().for_each(|v| *v *= 1e-50);
+            }
+            let k = m.mean.len() / 3;
+            let y: Vec<f64> = m.mean[k].iter().map(|v| v + 0.05).collect();
+            let y = m.clip(&y);
+            let s0 = sigma * sigma;
+            for (ea, om) in [
+                (0.1, m.om[0]),
+                (0.47, 0.5 * (m.om[0] + m.om[m.n_om - 1])),
+                (1.0, m.om[m.n_om - 1]),
+            ] {
+                let direct: f64 = m
+                    .wear_features
+                    .iter()
+                    .map(|&d| {
+                        let (mu, v) = m.stats_at(d, ea, om);
+                        let var = v + s0;
+                        -0.5 * (y[d] - mu).powi(2) / var - 0.5 * var.ln()
+                    })
+                    .sum();
+                let got = m.log_likelihood(
+                    &y,
+                    ea,
+                    om,
+                    &DiagnoseOptions {
+                        temperature: 1.0,
+                        ..opts.clone()
+                    },
+                );
+                assert!(
+                    (got - direct).abs() <= 1e-9 * direct.abs().max(1.0),
+                    "σ {sigma}, ea {ea}: {got} vs {direct}"
+                );
             }
         }
     }

@@ -14,7 +14,7 @@ use crate::record::{
     Column, Format, MAX_DECOMPRESSED_BYTES, ReadOptions, Record, gunzip, parse_record,
 };
 use crate::service::error::ApiError;
-use crate::service::records::{BodyFormat, Decoded, decode, parse_query};
+use crate::service::records::{BodyFormat, Decoded, JsonRecord, decode, parse_query};
 
 /// Sample rate the harnesses pass where a format needs one (Hz).
 const FS: f64 = 25_600.0;
@@ -140,6 +140,37 @@ pub fn json_body(data: &[u8]) {
     let limits = limits();
     if data.len() > limits.max_body_bytes {
         return;
+    }
+    // The fast sample path against serde_json: the same record (samples to serde_json's
+    // one-ulp rounding) or the same error message.
+    match (
+        JsonRecord::from_json(data),
+        serde_json::from_slice::<JsonRecord>(data),
+    ) {
+        (Ok(a), Ok(b)) => {
+            assert_eq!(a.samples.len(), b.samples.len(), "json: sample counts");
+            for (x, y) in a.samples.iter().zip(&b.samples) {
+                let ulps = (x.to_bits() as i64).wrapping_sub(y.to_bits() as i64).abs();
+                assert!(ulps <= 1, "json: sample {x} vs serde_json {y}");
+            }
+            assert_eq!(
+                (
+                    a.sample_rate_hz.to_bits(),
+                    a.shaft_hz,
+                    a.recorded_at,
+                    a.sensor
+                ),
+                (
+                    b.sample_rate_hz.to_bits(),
+                    b.shaft_hz,
+                    b.recorded_at,
+                    b.sensor
+                ),
+                "json: fields"
+            );
+        }
+        (Err(a), Err(b)) => assert_eq!(a.to_string(), b.to_string(), "json: error messages"),
+        (a, b) => panic!("json: fast path {a:?}, serde_json {b:?}"),
     }
     for query in [None, Some("shaft_hz=30&sensor=fuzz")] {
         let q = parse_query(query).expect("a fixed valid query");
