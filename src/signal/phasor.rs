@@ -190,14 +190,37 @@ fn fit_sums_impl(x: &[f64], cyc: f64) -> [f64; 5] {
 
 dispatch!(fit_sums_impl, fit_sums_avx2, (x: &[f64], cyc: f64) -> [f64; 5]);
 
-#[doc = concat!("See [`", stringify!(fit_sums_impl), "`]; AVX2 when available.")]
+/// The five sums of [`fit_sums_impl`]. The three that do not depend on the data have a closed
+/// form: with `φ = 4π c` and `D = Σ_{n<N} e^{iφn} = e^{iφ(N−1)/2} sin(Nφ/2) / sin(φ/2)`,
+/// `Σ cos² = N/2 + Re D / 2`, `Σ sin² = N/2 − Re D / 2`, `Σ cos sin = Im D / 2`; so only
+/// `Σ x cos` and `Σ x sin` are summed ([`dtft_sums`], two accumulators instead of five). Near
+/// `c ≡ 0` or `½` (where `sin(φ/2) → 0`) all five are summed.
 pub(crate) fn fit_sums(x: &[f64], cyc: f64) -> [f64; 5] {
+    if let Some([cc, ss, cs]) = gram_sums(x.len(), cyc) {
+        let (c, s) = dtft_sums(x, cyc);
+        return [c, s, cc, ss, cs];
+    }
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU supports AVX2 (checked just above).
         return unsafe { fit_sums_avx2(x, cyc) };
     }
     fit_sums_impl(x, cyc)
+}
+
+/// `(Σ cos², Σ sin², Σ cos sin)` of `2π c n`, `n < len`, in closed form (see [`fit_sums`]);
+/// `None` where `|sin 2πc| < 1e-3`. Phases are reduced to one cycle before `sin`/`cos`, so the
+/// error stays at the rounding of `c·len` (≈ 1e-12 cycles for a 25 600-sample record).
+fn gram_sums(len: usize, cyc: f64) -> Option<[f64; 3]> {
+    let den = (TAU * cyc.fract()).sin();
+    if !(den.abs() >= 1e-3) {
+        return None;
+    }
+    let n = len as f64;
+    let d = (TAU * (cyc * n).fract()).sin() / den;
+    let (sb, cb) = (TAU * (cyc * (n - 1.0)).fract()).sin_cos();
+    let (re, im) = (d * cb, d * sb);
+    Some([0.5 * (n + re), 0.5 * (n - re), 0.5 * im])
 }
 
 /// `x[n] -= a cos(2π c n) + b sin(2π c n)`.
@@ -278,7 +301,10 @@ mod tests {
             }
             // The dispatched (AVX2 when available) and the plain path agree bit for bit.
             assert_eq!(dtft_sums_impl(&x, cyc), (re, im));
-            assert_eq!(fit_sums_impl(&x, cyc), f);
+            // The closed-form Gram sums agree with the summed ones.
+            for (got, want) in f.iter().zip(fit_sums_impl(&x, cyc)) {
+                assert!((got - want).abs() < tol, "{n} {cyc}: {got} vs summed {want}");
+            }
             let (mut pc, mut ps) = (vec![0.0; n], vec![0.0; n]);
             unit_phasors(cyc, &mut pc, &mut ps);
             let (mut qc, mut qs) = (vec![0.0; n], vec![0.0; n]);
@@ -305,6 +331,26 @@ mod tests {
                 // The reference's own phase, `fract(c·i)·2π`, is only good to ≈ c·i·1e-16.
                 let e = (a - (b - 0.7 * cn + 1.3 * sn)).abs();
                 assert!(e < 1e-11, "{n} {cyc} sample {i}: error {e}");
+            }
+        }
+    }
+
+    /// [`fit_sums`] with closed-form Gram sums against all five summed, across frequencies
+    /// from near DC to near Nyquist, both sides of the 1e-3 switch to summing.
+    #[test]
+    fn closed_form_gram_sums_match_summed() {
+        for n in [17usize, 1883, 25_600, 100_003] {
+            let x = lcg(n, 3);
+            for cyc in [
+                1e-9, 1e-5, 1.6e-4, 1.59e-4, 0.0339843, 0.1, 0.25, 0.3333, 0.4, 0.4998, 0.49984,
+                0.4999, 0.4999999, 0.5,
+            ] {
+                let a = fit_sums(&x, cyc);
+                let b = fit_sums_impl(&x, cyc);
+                for (k, (got, want)) in a.iter().zip(b).enumerate() {
+                    let tol = 1e-11 * n as f64;
+                    assert!((got - want).abs() < tol, "n {n} c {cyc} sum {k}: {got} vs {want}");
+                }
             }
         }
     }
