@@ -29,7 +29,7 @@ use crate::error::{Error, Result};
 use crate::model::Frequencies;
 use crate::record::Record;
 use crate::signal::features::{ConditionIndicators, condition_indicators};
-use crate::signal::{Window, amplitude_spectrum, welch};
+use crate::signal::{Spectrum, Window, amplitude_spectrum, welch};
 use crate::signature::{
     LineDef, LineMeasurement, SEGMENT_PERIODS, SignatureTable, highest_ratio, measure_lines,
     segment_len,
@@ -689,13 +689,17 @@ fn partners(fr: &Frequencies) -> Vec<(&'static str, f64)> {
 struct SearchSpectrum {
     freq_step: f64,
     amp: Vec<f64>,
+    freq: Vec<f64>,
+    /// `amp` is the whole record's [`amplitude_spectrum`] (not Welch).
+    whole: bool,
     floor: LocalFloor,
 }
 
 impl SearchSpectrum {
     fn new(x: &[f64], fs: f64) -> Result<Self> {
         const MAX: usize = 1 << 17;
-        let s = if x.len() <= MAX {
+        let whole = x.len() <= MAX;
+        let s = if whole {
             amplitude_spectrum(x, fs, Window::Hann)?
         } else {
             welch(x, fs, MAX, 0.5, Window::Hann)?
@@ -704,7 +708,17 @@ impl SearchSpectrum {
         Ok(SearchSpectrum {
             freq_step: s.resolution(),
             amp: s.amplitude,
+            freq: s.freq,
+            whole,
             floor,
+        })
+    }
+
+    /// The whole record's Hann amplitude spectrum, if that is what the search used.
+    fn into_whole(self) -> Option<Spectrum> {
+        self.whole.then_some(Spectrum {
+            freq: self.freq,
+            amplitude: self.amp,
         })
     }
     /// Peak prominence (dB over the local floor) of the largest bin within ±tol Hz of f.
@@ -724,11 +738,11 @@ impl SearchSpectrum {
 fn locate_f1(
     x: &[f64],
     fs: f64,
+    spec: &SearchSpectrum,
     fr: &Frequencies,
     band: (f64, f64),
     nominal: Option<f64>,
 ) -> Result<(f64, F1Detection)> {
-    let spec = SearchSpectrum::new(x, fs)?;
     let df = spec.freq_step;
     let tol = |f: f64| (2.0 * df).max(0.002 * f);
     let w = crate::signal::shared_window(Window::Hann, x.len());
@@ -859,6 +873,18 @@ pub fn diagnose_with(
     matcher: &Matcher,
     opts: &DiagnoseOptions,
 ) -> Result<Diagnosis> {
+    diagnose_with_spectrum(record, table, matcher, opts).map(|(d, _)| d)
+}
+
+/// [`diagnose_with`], also handing back the spectrum its f1 search computed: the record's
+/// Hann-windowed [`amplitude_spectrum`] (`None` for a record over 2^17 samples, searched on a
+/// Welch average). The service plots that spectrum instead of transforming the record again.
+pub fn diagnose_with_spectrum(
+    record: &Record,
+    table: &SignatureTable,
+    matcher: &Matcher,
+    opts: &DiagnoseOptions,
+) -> Result<(Diagnosis, Option<Spectrum>)> {
     let x = &record.samples;
     let fs = record.sample_rate;
     crate::record::check_sample_rate(fs)?;
@@ -929,7 +955,8 @@ pub fn diagnose_with(
     if x.len() < needed_for(search.1) {
         return Err(short(search.1));
     }
-    let (f1, detection) = locate_f1(x, fs, &fr, search, nominal)?;
+    let spectrum = SearchSpectrum::new(x, fs)?;
+    let (f1, detection) = locate_f1(x, fs, &spectrum, &fr, search, nominal)?;
     let omega1 = f1 / f_ref;
     // Refinement may move a peak found at the band edge a hair outside it.
     let edge = BAND_EDGE_TOLERANCE * olo;
@@ -1129,7 +1156,7 @@ pub fn diagnose_with(
             })
             .collect()
     };
-    Ok(Diagnosis {
+    let diagnosis = Diagnosis {
         wear_degree: wear,
         f1_hz: f1,
         shaft_hz: shaft,
@@ -1160,7 +1187,8 @@ pub fn diagnose_with(
         table_model_hash: table.model_hash.clone(),
         sensor: table.sensor.label().into(),
         warnings,
-    })
+    };
+    Ok((diagnosis, spectrum.into_whole()))
 }
 
 fn nearest(axis: &[f64], v: f64) -> usize {

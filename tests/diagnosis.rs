@@ -6,9 +6,10 @@ use std::path::PathBuf;
 use std::sync::OnceLock;
 
 use gearwear::Error;
-use gearwear::diagnosis::{DiagnoseOptions, diagnose};
+use gearwear::diagnosis::{DiagnoseOptions, Matcher, diagnose, diagnose_with_spectrum};
 use gearwear::model::ModelAConfig;
 use gearwear::record::{Column, Format, ReadOptions, Record, encode_wav, read_record};
+use gearwear::signal::Window;
 use gearwear::signature::precompute::{MeasurementSpec, simulate_measurement};
 use gearwear::signature::{SensorQuantity, SignatureTable};
 
@@ -174,6 +175,29 @@ fn f1_is_found_with_and_without_the_shaft_rate() {
     assert!((d.omega1 - 1.07).abs() < 1e-4);
     let w = &d.wear_degree;
     assert!(w.lower <= w.estimate && w.estimate <= w.upper);
+}
+
+/// The spectrum `diagnose_with_spectrum` hands back (what the service plots) is the record's
+/// own Hann amplitude spectrum, bit for bit, and the diagnosis is `diagnose`'s.
+#[test]
+fn the_search_spectrum_handed_back_is_the_records_hann_spectrum() {
+    let rec = synthetic(1.07 * 870.0, 25_600.0, 1.0, 3.0);
+    let opts = DiagnoseOptions::default();
+    let m = Matcher::new(table(), &opts).unwrap();
+    let (d, s) = diagnose_with_spectrum(&rec, table(), &m, &opts).unwrap();
+    let s = s.expect("a 25 600-sample record is searched on its whole spectrum");
+    let want =
+        gearwear::signal::amplitude_spectrum(&rec.samples, rec.sample_rate, Window::Hann).unwrap();
+    assert_eq!((s.freq, s.amplitude), (want.freq, want.amplitude));
+    let plain = diagnose(&rec, table(), &opts).unwrap();
+    assert_eq!(
+        serde_json::to_value(&d).unwrap(),
+        serde_json::to_value(&plain).unwrap()
+    );
+    // Over 2^17 samples the search uses a Welch average: nothing to hand back.
+    let long = synthetic(870.0, 25_600.0, 5.2, 1.0);
+    let (_, s) = diagnose_with_spectrum(&long, table(), &m, &opts).unwrap();
+    assert!(s.is_none());
 }
 
 #[test]

@@ -10,7 +10,7 @@ use serde_json::json;
 use super::diagnoser::{Diagnoser, Input, MachineCalibration, Output};
 use crate::closed_loop::held::{HeldEffects, MAX_CORRECTION_DB, decolour};
 use crate::closed_loop::{CalibrateOptions, calibrate, refit_held};
-use crate::diagnosis::{DiagnoseOptions, Matcher, diagnose_with};
+use crate::diagnosis::{DiagnoseOptions, Matcher, diagnose_with, diagnose_with_spectrum};
 use crate::model::ModelAConfig;
 use crate::record::Record;
 use crate::signature::SignatureTable;
@@ -167,12 +167,14 @@ impl Diagnoser for TableDiagnoser {
             }),
             None => None,
         };
-        let d = diagnose_with(
+        let (d, spectrum) = diagnose_with_spectrum(
             corrected.as_ref().unwrap_or(&rec),
             &self.table,
             &self.matcher,
             &opts,
         )?;
+        // The spectrum of a corrected copy is not the record's: the plot shows the record.
+        let spectrum = spectrum.filter(|_| corrected.is_none());
         let mut diagnosis =
             serde_json::to_value(&d).map_err(|e| crate::Error::Signal(e.to_string()))?;
         if let Some((cal, h)) = &held {
@@ -200,6 +202,7 @@ impl Diagnoser for TableDiagnoser {
                 "omega1": d.omega1,
             }),
             diagnosis,
+            spectrum,
         })
     }
 

@@ -39,6 +39,9 @@ pub struct Output {
     pub marks: Vec<(String, f64)>,
     /// Features stored with the record (lines, condition indicators).
     pub features: Value,
+    /// The record's Hann amplitude spectrum, when the diagnosis computed it for the samples as
+    /// received (not for a calibration-corrected copy): the plot is drawn from it.
+    pub spectrum: Option<crate::signal::Spectrum>,
 }
 
 /// Diagnose one record. Errors are the library's, mapped to problem+json by the caller.

@@ -15,7 +15,7 @@ use super::AppState;
 use super::auth::Caller;
 use super::diagnoser::Input;
 use super::error::{ApiError, ApiResult};
-use super::spectrum::plot_spectrum;
+use super::spectrum::{plot_from_spectrum, plot_spectrum};
 use crate::keys::Scope;
 use crate::store::{DiagnosisRow, IdemRow, Ingest, NewRecord, StoreError, new_id, now_ms};
 
@@ -143,34 +143,20 @@ fn fast_json_record(b: &[u8]) -> Option<JsonRecord> {
     })
 }
 
-/// `t` is exactly one number in JSON's grammar.
+/// `t`, a number `fast_float2` read whole, is also one in JSON's grammar. `fast_float2` takes
+/// `[+-]? digits* (. digits*)? ([eE][+-]?digits+)?` with at least one mantissa digit, and
+/// `inf`/`nan`; JSON differs in wanting a digit first (after an optional `-`; the caller has
+/// excluded `+`), no leading zero before another digit, and a digit after the point.
 fn is_json_number(t: &[u8]) -> bool {
-    let digits = |t: &[u8]| t.iter().take_while(|c| c.is_ascii_digit()).count();
     let t = t.strip_prefix(b"-").unwrap_or(t);
-    let n = digits(t);
-    if n == 0 || (n > 1 && t[0] == b'0') {
-        return false;
+    match t {
+        [b'0', b'0'..=b'9', ..] => false,
+        [b'0'..=b'9', ..] => match t.iter().position(|&c| c == b'.') {
+            Some(p) => t.get(p + 1).is_some_and(u8::is_ascii_digit),
+            None => true,
+        },
+        _ => false,
     }
-    let mut t = &t[n..];
-    if let Some(f) = t.strip_prefix(b".") {
-        let n = digits(f);
-        if n == 0 {
-            return false;
-        }
-        t = &f[n..];
-    }
-    if let Some((b'e' | b'E', e)) = t.split_first() {
-        let e = e
-            .strip_prefix(b"+")
-            .or_else(|| e.strip_prefix(b"-"))
-            .unwrap_or(e);
-        let n = digits(e);
-        if n == 0 {
-            return false;
-        }
-        t = &e[n..];
-    }
-    t.is_empty()
 }
 
 struct JsonCursor<'a> {
@@ -719,8 +705,11 @@ async fn ingest(
     };
     let diag = app.diagnoser.clone();
     let (input, out) = tokio::task::spawn_blocking(move || {
-        let out = diag.diagnose(&input).map(|o| {
-            let sp = plot_spectrum(&input.samples, input.sample_rate_hz, o.f1_hz, &o.marks);
+        let out = diag.diagnose(&input).map(|mut o| {
+            let sp = match o.spectrum.take() {
+                Some(s) => plot_from_spectrum(&s, o.f1_hz, &o.marks),
+                None => plot_spectrum(&input.samples, input.sample_rate_hz, o.f1_hz, &o.marks),
+            };
             (o, sp)
         });
         (input, out)

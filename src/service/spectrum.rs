@@ -5,7 +5,7 @@
 
 use serde::Serialize;
 
-use crate::signal::{Window, amplitude_spectrum};
+use crate::signal::{Spectrum, Window, amplitude_spectrum};
 
 pub const MAX_POINTS: usize = 1200;
 const UPPER: f64 = 2.5;
@@ -32,6 +32,15 @@ pub fn plot_spectrum(x: &[f64], fs: f64, f1: f64, marks: &[(String, f64)]) -> Op
         return None;
     }
     let s = amplitude_spectrum(x, fs, Window::Hann).ok()?;
+    plot_from_spectrum(&s, f1, marks)
+}
+
+/// [`plot_spectrum`] from the record's Hann [`amplitude_spectrum`] already computed (the one
+/// [`crate::diagnosis::diagnose_with_spectrum`] hands back).
+pub fn plot_from_spectrum(s: &Spectrum, f1: f64, marks: &[(String, f64)]) -> Option<PlotSpectrum> {
+    if !(f1 > 0.0) || s.freq.len() < 9 {
+        return None;
+    }
     let df = s.resolution();
     let hi = ((UPPER * f1 / df).ceil() as usize).min(s.freq.len() - 1);
     let (_, a1) = s.peak_near(f1, (0.01 * f1).max(2.0 * df));

@@ -303,7 +303,10 @@ mod tests {
             assert_eq!(dtft_sums_impl(&x, cyc), (re, im));
             // The closed-form Gram sums agree with the summed ones.
             for (got, want) in f.iter().zip(fit_sums_impl(&x, cyc)) {
-                assert!((got - want).abs() < tol, "{n} {cyc}: {got} vs summed {want}");
+                assert!(
+                    (got - want).abs() < tol,
+                    "{n} {cyc}: {got} vs summed {want}"
+                );
             }
             let (mut pc, mut ps) = (vec![0.0; n], vec![0.0; n]);
             unit_phasors(cyc, &mut pc, &mut ps);
@@ -349,7 +352,10 @@ mod tests {
                 let b = fit_sums_impl(&x, cyc);
                 for (k, (got, want)) in a.iter().zip(b).enumerate() {
                     let tol = 1e-11 * n as f64;
-                    assert!((got - want).abs() < tol, "n {n} c {cyc} sum {k}: {got} vs {want}");
+                    assert!(
+                        (got - want).abs() < tol,
+                        "n {n} c {cyc} sum {k}: {got} vs {want}"
+                    );
                 }
             }
         }
