@@ -10,6 +10,13 @@
 #
 #   scripts/service_bench.sh [BINARY] [LABEL]      # default: target/release/gearwear, "this"
 #
+# Environment (defaults in brackets): BENCH_RECORDS [model four], BENCH_FORMATS [json f32],
+# BENCH_SECONDS [15], BENCH_CONCURRENCY [4], BENCH_SERVE_ARGS [none; e.g.
+# "--raw-retention-days 0"]. When `perf` can count hardware events, each case also prints the
+# whole machine's user-space instructions and user/kernel cycles per record (server, load
+# generator and anything else running): a load-independent figure for A/B comparisons on a
+# machine whose clock and neighbours vary (`perf stat -a`).
+#
 # For an A/B, build the other commit in a worktree and run this script with each binary in
 # turn, twice, on an otherwise idle machine (the load generator shares the two cores).
 set -euo pipefail
@@ -24,20 +31,42 @@ gw_fresh_store sqlite bench
 trap gw_cleanup EXIT
 target/release/gearwear synth --ea 0.5 --output "$GW_DIR/model.wav" >/dev/null
 key=$(gw_key ingest,read)
-gw_serve "$GW_DIR/serve.log" --allow-stale-table
+# shellcheck disable=SC2086
+gw_serve "$GW_DIR/serve.log" --allow-stale-table ${BENCH_SERVE_ARGS:-}
 pid=$GW_PID port=$GW_PORT
 d=$GW_DIR
 echo "# $label: $B, $(date -u +%FT%TZ), load average $(cut -d' ' -f1-3 /proc/loadavg)"
-for rec in model four; do
-  for fmt in json f32; do
+secs=${BENCH_SECONDS:-15}
+perf_ok=false
+perf stat -a -x, -e instructions:u -o /dev/null -- true >/dev/null 2>&1 && perf_ok=true
+for rec in ${BENCH_RECORDS:-model four}; do
+  for fmt in ${BENCH_FORMATS:-json f32}; do
     extra=()
     [ "$rec" = model ] && extra=(--record "$d/model.wav")
-    "$LG" --url "http://127.0.0.1:$port" --key "$key" --concurrency 4 --seconds 15 \
-      --format "$fmt" --pid "$pid" "${extra[@]}" 2>&1 | tail -1 | python3 -c "
-import json, sys
-s = json.load(sys.stdin)
-print(f\"$label $rec {s['format']:4} {s['records_per_second']:6.1f} rec/s  p50 {s['p50_ms']:5.1f} ms  p99 {s['p99_ms']:5.1f} ms  \"
-      f\"server CPU {s['server_cpu_ms_per_record']:5.2f} ms/record  errors {s['errors']}  \"
-      f\"RSS end {s['rss_end_kb']/1024:.1f} MB (peak {s['rss_peak_kb']/1024:.1f})\")"
+    stat="$d/perf.stat"
+    rm -f "$stat"
+    perf_pid=""
+    if $perf_ok; then
+      perf stat -a -x, -e instructions:u,cycles:u,cycles:k -o "$stat" -- sleep "$((secs + 1))" &
+      perf_pid=$!
+    fi
+    "$LG" --url "http://127.0.0.1:$port" --key "$key" --concurrency "${BENCH_CONCURRENCY:-4}" \
+      --seconds "$secs" --format "$fmt" --pid "$pid" "${extra[@]}" 2>&1 | tail -1 >"$d/run.json"
+    [ -n "$perf_pid" ] && wait "$perf_pid"
+    STAT="$stat" python3 -c "
+import json, os
+s = json.load(open('$d/run.json'))
+line = (f\"$label $rec {s['format']:4} {s['records_per_second']:6.1f} rec/s  p50 {s['p50_ms']:5.1f} ms  p99 {s['p99_ms']:5.1f} ms  \"
+        f\"server CPU {s['server_cpu_ms_per_record']:5.2f} ms/record  errors {s['errors']}  \"
+        f\"RSS end {s['rss_end_kb']/1024:.1f} MB (peak {s['rss_peak_kb']/1024:.1f})\")
+if os.path.exists(os.environ['STAT']) and s['records']:
+    ev = {}
+    for l in open(os.environ['STAT']):
+        p = l.split(',')
+        if len(p) > 2 and p[0].replace('.', '').isdigit():
+            ev[p[2]] = float(p[0]) / s['records'] / 1e6
+    line += (f\"  per record: instructions {ev.get('instructions:u', float('nan')):.1f} M, cycles \"
+             f\"user {ev.get('cycles:u', float('nan')):.1f} M kernel {ev.get('cycles:k', float('nan')):.1f} M\")
+print(line)"
   done
 done

@@ -966,4 +966,62 @@ mod tests {
             }
         }
     }
+
+    /// Random edits of valid bodies (bytes inserted, deleted or replaced, drawn from JSON's
+    /// punctuation, digits and letters): the fast path and serde_json agree on every one — the
+    /// same record (samples to one ulp) or the same error message.
+    #[test]
+    fn mutated_bodies_get_serde_json_s_answer() {
+        const ALPHABET: &[u8] = b"0123456789-+.eE ,[]{}:\"nultrfasxyz\\\n\t\x7f\xc3\xa9";
+        let bases = [
+            r#"{"sample_rate_hz": 25600, "samples": [0.5, -1.25e-3, 7, 0, -0.0]}"#,
+            r#"{"samples":[1,2,3],"sample_rate_hz":1e4,"shaft_hz":30,"sensor":"s","recorded_at":"2026-11-22T08:30:00Z"}"#,
+            r#"{"sample_rate_hz": 25600, "samples": [], "shaft_hz": null, "sensor": null}"#,
+        ];
+        let mut rng = crate::signature::SplitMix64::new(99);
+        let mut pick = |n: usize| (rng.next_u64() % n as u64) as usize;
+        let (mut taken, mut total) = (0, 0);
+        for _ in 0..30_000 {
+            let mut b = bases[pick(bases.len())].as_bytes().to_vec();
+            for _ in 0..1 + pick(3) {
+                let i = pick(b.len() + 1);
+                let c = ALPHABET[pick(ALPHABET.len())];
+                match pick(3) {
+                    0 => b.insert(i, c),
+                    1 if i < b.len() => {
+                        b.remove(i);
+                    }
+                    _ if i < b.len() => b[i] = c,
+                    _ => b.push(c),
+                }
+            }
+            total += 1;
+            if fast_json_record(&b).is_some() {
+                taken += 1;
+            }
+            let fast = JsonRecord::from_json(&b).map_err(|e| e.to_string());
+            let slow = serde_json::from_slice::<JsonRecord>(&b).map_err(|e| e.to_string());
+            let body = String::from_utf8_lossy(&b);
+            match (&fast, &slow) {
+                (Err(x), Err(y)) => assert_eq!(x, y, "{body}"),
+                (Ok(x), Ok(y)) => {
+                    assert_eq!(x.samples.len(), y.samples.len(), "{body}");
+                    for (u, v) in x.samples.iter().zip(&y.samples) {
+                        assert!(
+                            (u.to_bits() as i64 - v.to_bits() as i64).abs() <= 1,
+                            "{body}"
+                        );
+                    }
+                    assert_eq!(
+                        (x.sample_rate_hz, x.shaft_hz, &x.recorded_at, &x.sensor),
+                        (y.sample_rate_hz, y.shaft_hz, &y.recorded_at, &y.sensor),
+                        "{body}"
+                    );
+                }
+                _ => panic!("{body}: fast {fast:?}, serde_json {slow:?}"),
+            }
+        }
+        // The edits leave a good share of bodies valid, so the fast path is exercised too.
+        assert!(taken * 30 > total, "fast path took {taken} of {total}");
+    }
 }
