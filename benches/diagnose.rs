@@ -13,6 +13,9 @@
 
 use std::time::Instant;
 
+#[path = "common/four_sines.rs"]
+mod four_sines;
+
 use gearwear::diagnosis::{DiagnoseOptions, Matcher, diagnose_with};
 use gearwear::model::{ModelAConfig, Wear};
 use gearwear::record::Record;
@@ -93,23 +96,10 @@ fn main() {
     }
 
     let rec = record(&cfg, 0.8, 1.0, 1.0, 1);
-    // The load generator's record (`examples/loadgen.rs`): four sines at the rig's mesh
-    // ratios, not a model output — a poor fit (χ²/feature ≈ 87), the service's worst case.
-    let fs = 25_600.0;
-    let f1 = 1.07 * 870.0;
-    let four_sines = Record {
-        samples: (0..25_600)
-            .map(|i| {
-                use std::f64::consts::TAU;
-                let t = i as f64 / fs;
-                (TAU * f1 * t).sin()
-                    + 0.2 * (TAU * 0.36 * f1 * t).sin()
-                    + 0.05 * (TAU * 0.0875 * f1 * t).sin()
-                    + 0.3 * (TAU * 2.0 * f1 * t).sin()
-                    + 0.01 * ((i * 7919 % 1000) as f64 / 1000.0 - 0.5)
-            })
-            .collect(),
-        sample_rate: fs,
+    // The load generator's record: a poor fit, the service's worst case.
+    let poor_fit = Record {
+        samples: four_sines::samples(),
+        sample_rate: four_sines::SAMPLE_RATE_HZ,
     };
     println!(
         "record: {} samples at {} Hz; {reps} calls per case",
@@ -121,7 +111,7 @@ fn main() {
     for (label, shaft, rec) in [
         ("model record, tacho-less", None, &rec),
         ("model record, speed given", Some(30.0), &rec),
-        ("four sines (poor fit), tacho-less", None, &four_sines),
+        ("four sines (poor fit), tacho-less", None, &poor_fit),
     ] {
         let o = DiagnoseOptions {
             shaft_hz: shaft,

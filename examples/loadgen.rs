@@ -24,9 +24,11 @@
 //!     --report-every 60 --pid $(pgrep -n gearwear)
 //! ```
 
-use std::f64::consts::TAU;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
+
+#[path = "../benches/common/four_sines.rs"]
+mod four_sines;
 
 fn arg(args: &[String], name: &str, default: &str) -> String {
     args.iter()
@@ -67,22 +69,6 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
     sorted[((sorted.len() as f64 - 1.0) * p).round() as usize] * 1e3
 }
 
-/// 1 s at 25.6 kHz: f1 = 1.07·870 Hz with three partner sines and a little noise.
-fn four_sines() -> Vec<f64> {
-    let fs = 25_600.0;
-    let f1 = 1.07 * 870.0;
-    (0..25_600)
-        .map(|i| {
-            let t = i as f64 / fs;
-            (TAU * f1 * t).sin()
-                + 0.2 * (TAU * 0.36 * f1 * t).sin()
-                + 0.05 * (TAU * 0.0875 * f1 * t).sin()
-                + 0.3 * (TAU * 2.0 * f1 * t).sin()
-                + 0.01 * ((i * 7919 % 1000) as f64 / 1000.0 - 0.5)
-        })
-        .collect()
-}
-
 #[derive(Default)]
 struct Window {
     lat: Vec<f64>,
@@ -107,7 +93,7 @@ async fn main() {
     // file `gearwear diagnose` reads (e.g. one written by `gearwear synth`), resampled to
     // nothing: its own samples and rate.
     let (x, fs) = if record.is_empty() {
-        (four_sines(), 25_600.0)
+        (four_sines::samples(), four_sines::SAMPLE_RATE_HZ)
     } else {
         let r = gearwear::record::read_record(
             std::path::Path::new(&record),
