@@ -21,15 +21,15 @@
 # turn, twice, on an otherwise idle machine (the load generator shares the two cores).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-GW_BIN=${1:-target/release/gearwear}
+GW_BIN=${1:-${CARGO_TARGET_DIR:-target}/release/gearwear}
 B=$GW_BIN
 label=${2:-this}
 cargo build --release --quiet --bin gearwear --example loadgen
-LG=target/release/examples/loadgen
+LG=${CARGO_TARGET_DIR:-target}/release/examples/loadgen
 . scripts/lib/serve.sh
 gw_fresh_store sqlite bench
 trap gw_cleanup EXIT
-target/release/gearwear synth --ea 0.5 --output "$GW_DIR/model.wav" >/dev/null
+"${CARGO_TARGET_DIR:-target}"/release/gearwear synth --ea 0.5 --output "$GW_DIR/model.wav" >/dev/null
 key=$(gw_key ingest,read)
 # shellcheck disable=SC2086
 gw_serve "$GW_DIR/serve.log" --allow-stale-table ${BENCH_SERVE_ARGS:-}

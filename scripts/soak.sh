@@ -29,7 +29,7 @@ while [ $# -gt 0 ]; do
 done
 
 cargo build --release --quiet --bin gearwear --example loadgen
-LG=target/release/examples/loadgen
+LG=${CARGO_TARGET_DIR:-target}/release/examples/loadgen
 . scripts/lib/serve.sh
 gw_fresh_store "$store" soak
 trap gw_cleanup EXIT

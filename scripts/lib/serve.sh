@@ -8,7 +8,7 @@
 #   trap gw_cleanup EXIT                     # stops the server, drops the database, rm GW_DIR
 #
 # The server runs with rate limits out of the way (the limiter is tested in tests/api).
-GW_BIN=${GW_BIN:-target/release/gearwear}
+GW_BIN=${GW_BIN:-${CARGO_TARGET_DIR:-target}/release/gearwear}
 GW_PID="" GW_PG_NAME=""
 
 gw_fresh_store() {
