@@ -77,8 +77,9 @@ impl JsonRecord {
     /// is not a number or overflows, any syntax error — goes through `serde_json` whole, so every
     /// error message is serde_json's.
     ///
-    /// Samples are correctly rounded (`fast_float2`, like Rust's `str::parse::<f64>`);
-    /// serde_json's default number path may differ from that by one unit in the last place.
+    /// Numbers are correctly rounded (`fast_float2`, like Rust's `str::parse::<f64>`);
+    /// serde_json's default number path may differ from that by one unit in the last place
+    /// (the fuzzer found a long integer rate where it does).
     pub fn from_json(bytes: &[u8]) -> serde_json::Result<JsonRecord> {
         match fast_json_record(bytes) {
             Some(r) => Ok(r),
