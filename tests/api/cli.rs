@@ -1,7 +1,7 @@
 //! The binary: `keys create|list|revoke`, and `serve` refusing a non-loopback address
 //! without keys.
 
-use crate::helpers::gearwear_bin;
+use crate::helpers::{gearwear_bin, gearwear_ok};
 
 #[test]
 fn keys_are_printed_once_and_stored_hashed() {
@@ -22,25 +22,16 @@ fn keys_are_printed_once_and_stored_hashed() {
         "{err}"
     );
 
-    let out = gearwear_bin()
-        .args([
-            "keys",
-            "create",
-            "--scope",
-            "ingest,read",
-            "--label",
-            "daq-box",
-            "--database-url",
-            db,
-        ])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let token = String::from_utf8(out.stdout).unwrap().trim().to_string();
+    let token = gearwear_ok(&[
+        "keys",
+        "create",
+        "--scope",
+        "ingest,read",
+        "--label",
+        "daq-box",
+        "--database-url",
+        db,
+    ]);
     let (id, secret) = gearwear::keys::split_token(&token).expect("a key");
     // The store holds the hash, never the secret.
     let bytes = std::fs::read(dir.join("k.db")).unwrap();

@@ -19,18 +19,20 @@ pub fn gearwear_bin() -> std::process::Command {
     c
 }
 
-/// `gearwear keys create --scope SCOPE --database-url URL`, as an operator runs it; the key.
-pub fn cli_key(db_url: &str, scope: &str) -> String {
-    let out = gearwear_bin()
-        .args(["keys", "create", "--scope", scope, "--database-url", db_url])
-        .output()
-        .unwrap();
+/// `gearwear ARGS…`, which must succeed: its standard output, trimmed.
+pub fn gearwear_ok(args: &[&str]) -> String {
+    let out = gearwear_bin().args(args).output().unwrap();
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
     String::from_utf8(out.stdout).unwrap().trim().to_string()
+}
+
+/// `gearwear keys create --scope SCOPE --database-url URL`, as an operator runs it; the key.
+pub fn cli_key(db_url: &str, scope: &str) -> String {
+    gearwear_ok(&["keys", "create", "--scope", scope, "--database-url", db_url])
 }
 
 /// Which store a test runs against.
