@@ -141,36 +141,7 @@ pub fn json_body(data: &[u8]) {
     if data.len() > limits.max_body_bytes {
         return;
     }
-    // The fast path against serde_json: the same record (every number to serde_json's one-ulp
-    // rounding: its default float parser is not always correctly rounded) or the same error.
-    let ulps = |x: f64, y: f64| (x.to_bits() as i64).wrapping_sub(y.to_bits() as i64).abs();
-    match (
-        JsonRecord::from_json(data),
-        serde_json::from_slice::<JsonRecord>(data),
-    ) {
-        (Ok(a), Ok(b)) => {
-            assert_eq!(a.samples.len(), b.samples.len(), "json: sample counts");
-            for (&x, &y) in a.samples.iter().zip(&b.samples) {
-                assert!(ulps(x, y) <= 1, "json: sample {x} vs serde_json {y}");
-            }
-            let (x, y) = (a.sample_rate_hz, b.sample_rate_hz);
-            assert!(
-                ulps(x, y) <= 1,
-                "json: sample_rate_hz {x} vs serde_json {y}"
-            );
-            match (a.shaft_hz, b.shaft_hz) {
-                (Some(x), Some(y)) => assert!(ulps(x, y) <= 1, "json: shaft_hz {x} vs {y}"),
-                (x, y) => assert_eq!(x, y, "json: shaft_hz"),
-            }
-            assert_eq!(
-                (a.recorded_at, a.sensor),
-                (b.recorded_at, b.sensor),
-                "json: strings"
-            );
-        }
-        (Err(a), Err(b)) => assert_eq!(a.to_string(), b.to_string(), "json: error messages"),
-        (a, b) => panic!("json: fast path {a:?}, serde_json {b:?}"),
-    }
+    json_fast_path_agrees(data);
     for query in [None, Some("shaft_hz=30&sensor=fuzz")] {
         let q = parse_query(query).expect("a fixed valid query");
         let what = format!("json {query:?}");
@@ -186,6 +157,60 @@ pub fn json_body(data: &[u8]) {
             }
             Err(e) => check_problem(&e, &what),
         }
+    }
+}
+
+/// [`JsonRecord::from_json`] (the one-pass reader, serde_json for the rest) against
+/// `serde_json::from_slice` alone: the same record, every number within one ulp (serde_json's
+/// default float parser is not always correctly rounded), or the same error message. Panics
+/// otherwise, naming the body.
+pub fn json_fast_path_agrees(data: &[u8]) {
+    let ulps = |x: f64, y: f64| (x.to_bits() as i64).wrapping_sub(y.to_bits() as i64).abs();
+    let body = || String::from_utf8_lossy(data);
+    match (
+        JsonRecord::from_json(data),
+        serde_json::from_slice::<JsonRecord>(data),
+    ) {
+        (Ok(a), Ok(b)) => {
+            assert_eq!(
+                a.samples.len(),
+                b.samples.len(),
+                "json: sample counts: {}",
+                body()
+            );
+            for (&x, &y) in a.samples.iter().zip(&b.samples) {
+                assert!(
+                    ulps(x, y) <= 1,
+                    "json: sample {x} vs serde_json {y}: {}",
+                    body()
+                );
+            }
+            let (x, y) = (a.sample_rate_hz, b.sample_rate_hz);
+            assert!(
+                ulps(x, y) <= 1,
+                "json: sample_rate_hz {x} vs serde_json {y}: {}",
+                body()
+            );
+            match (a.shaft_hz, b.shaft_hz) {
+                (Some(x), Some(y)) => {
+                    assert!(ulps(x, y) <= 1, "json: shaft_hz {x} vs {y}: {}", body())
+                }
+                (x, y) => assert_eq!(x, y, "json: shaft_hz: {}", body()),
+            }
+            assert_eq!(
+                (a.recorded_at, a.sensor),
+                (b.recorded_at, b.sensor),
+                "json: strings: {}",
+                body()
+            );
+        }
+        (Err(a), Err(b)) => assert_eq!(
+            a.to_string(),
+            b.to_string(),
+            "json: error messages: {}",
+            body()
+        ),
+        (a, b) => panic!("json: fast path {a:?}, serde_json {b:?}: {}", body()),
     }
 }
 

@@ -970,7 +970,8 @@ mod tests {
 
     /// Random edits of valid bodies (bytes inserted, deleted or replaced, drawn from JSON's
     /// punctuation, digits and letters): the fast path and serde_json agree on every one — the
-    /// same record (samples to one ulp) or the same error message.
+    /// same record (numbers to one ulp) or the same error message
+    /// ([`crate::fuzzing::json_fast_path_agrees`], the `json_body` fuzz harness's check).
     #[test]
     fn mutated_bodies_get_serde_json_s_answer() {
         const ALPHABET: &[u8] = b"0123456789-+.eE ,[]{}:\"nultrfasxyz\\\n\t\x7f\xc3\xa9";
@@ -1000,27 +1001,7 @@ mod tests {
             if fast_json_record(&b).is_some() {
                 taken += 1;
             }
-            let fast = JsonRecord::from_json(&b).map_err(|e| e.to_string());
-            let slow = serde_json::from_slice::<JsonRecord>(&b).map_err(|e| e.to_string());
-            let body = String::from_utf8_lossy(&b);
-            match (&fast, &slow) {
-                (Err(x), Err(y)) => assert_eq!(x, y, "{body}"),
-                (Ok(x), Ok(y)) => {
-                    assert_eq!(x.samples.len(), y.samples.len(), "{body}");
-                    for (u, v) in x.samples.iter().zip(&y.samples) {
-                        assert!(
-                            (u.to_bits() as i64 - v.to_bits() as i64).abs() <= 1,
-                            "{body}"
-                        );
-                    }
-                    assert_eq!(
-                        (x.sample_rate_hz, x.shaft_hz, &x.recorded_at, &x.sensor),
-                        (y.sample_rate_hz, y.shaft_hz, &y.recorded_at, &y.sensor),
-                        "{body}"
-                    );
-                }
-                _ => panic!("{body}: fast {fast:?}, serde_json {slow:?}"),
-            }
+            crate::fuzzing::json_fast_path_agrees(&b);
         }
         // The edits leave a good share of bodies valid, so the fast path is exercised too.
         assert!(taken * 30 > total, "fast path took {taken} of {total}");
