@@ -120,6 +120,9 @@ pub enum Error {
         min_hz: f64,
         max_hz: f64,
     },
+    /// A gearbox description is unusable.
+    #[error(transparent)]
+    Gearbox(#[from] crate::gearbox::GearboxError),
     /// The signature table was computed for another model configuration.
     #[error(
         "stale signature table: it was computed for model hash {table_hash}, the current \

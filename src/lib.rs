@@ -30,6 +30,7 @@ pub mod diagnosis_cli;
 pub mod error;
 #[doc(hidden)]
 pub mod fuzzing;
+pub mod gearbox;
 pub mod keys;
 pub mod model;
 pub mod model_b_cli;

@@ -1,0 +1,185 @@
+//! The gearbox as an input: a description a user writes from tooth counts (physics optional),
+//! validated, with its exact kinematics and the dynamic model built from it.
+//!
+//! - [`description`]: the file format (`gearwear-gearbox`, version 1, TOML or JSON).
+//! - [`kinematics`]: the validated topology, every shaft rate and mesh frequency.
+//! - [`build`]: physical values (given or defaulted and listed as assumed) and the generic
+//!   [`Assembly`](crate::model::Assembly) for a wear degree.
+//!
+//! [`Gearbox`] ties them together; [`Gearbox::paper_rig`] is the first paper's test rig
+//! (`configs/gearboxes/wang2019.toml`), which resolves to the same model as the original
+//! hand-written configuration (tested to 1e-12).
+
+pub mod build;
+pub mod description;
+pub mod error;
+pub mod kinematics;
+
+use std::path::Path;
+
+use serde::Serialize;
+use sha2::{Digest, Sha256};
+
+pub use build::{AssumedValue, MeshValues, Physics};
+pub use description::{GearboxDescription, TextFormat};
+pub use error::GearboxError;
+pub use kinematics::{Fixed, Kinematics, Stage, Topology};
+
+use crate::model::{Assembly, Wear};
+
+/// The first paper's rig as a description (committed as `configs/gearboxes/wang2019.toml`).
+pub const PAPER_RIG: &str = include_str!("../../configs/gearboxes/wang2019.toml");
+
+/// A validated, resolved gearbox: description, topology, kinematics ratios and physics.
+#[derive(Debug, Clone, Serialize)]
+pub struct Gearbox {
+    pub description: GearboxDescription,
+    /// SHA-256 (hex) of the description's canonical JSON.
+    pub hash: String,
+    #[serde(skip)]
+    pub topology: Topology,
+    /// Mesh frequency over the reference (stage-1) mesh frequency, per stage.
+    pub mesh_ratios: Vec<f64>,
+    pub physics: Physics,
+    /// Every value the description did not give, with the rule that gave it.
+    pub assumed: Vec<AssumedValue>,
+    /// True when the dynamics rest on estimates (no stiffness, inertia or reference frequency
+    /// was given for the reference mesh).
+    pub dynamics_estimated: bool,
+    /// Non-fatal remarks (e.g. planets that cannot be equally spaced).
+    pub warnings: Vec<String>,
+}
+
+impl Gearbox {
+    /// Validate and resolve a description.
+    pub fn new(description: GearboxDescription) -> Result<Self, GearboxError> {
+        let name_ok = !description.name.is_empty()
+            && description.name.len() <= 64
+            && description
+                .name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'));
+        if !name_ok {
+            return Err(GearboxError::Name {
+                name: description.name.clone(),
+            });
+        }
+        let topology = Topology::new(&description)?;
+        let (physics, assumed) = build::physics(&description, &topology)?;
+        let mesh_ratios = build::mesh_ratios(&topology);
+        let hash = Sha256::digest(description.canonical_json().as_bytes())
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect();
+        let dynamics_estimated = description.reference_frequency_hz.is_none()
+            && assumed.iter().any(|a| {
+                a.what.contains("stiffness") && !a.what.contains("fluctuation")
+                    || a.what.contains("inertia")
+                    || a.what.contains("module")
+            });
+        let gb = Gearbox {
+            warnings: topology.warnings.clone(),
+            description,
+            hash,
+            topology,
+            mesh_ratios,
+            physics,
+            assumed,
+            dynamics_estimated,
+        };
+        // The model must assemble and resolve (one rigid-body mode for the balancing load).
+        gb.assembly(Wear::fixed_axis(0.5))
+            .and_then(|a| a.resolve())
+            .map_err(|e| GearboxError::Model(e.to_string()))?;
+        Ok(gb)
+    }
+
+    /// Parse (TOML or JSON, see [`GearboxDescription::parse`]) and resolve.
+    pub fn parse(text: &str, origin: &str) -> Result<Self, GearboxError> {
+        Self::new(GearboxDescription::parse(text, None, origin)?)
+    }
+
+    /// Read a description file (`.json`: JSON, anything else: TOML unless it starts with `{`).
+    pub fn from_file(path: &Path) -> crate::error::Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|source| crate::error::Error::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        let fmt = match path.extension().and_then(|e| e.to_str()) {
+            Some("json") => Some(TextFormat::Json),
+            Some("toml") => Some(TextFormat::Toml),
+            _ => None,
+        };
+        let d = GearboxDescription::parse(&text, fmt, &path.display().to_string())?;
+        Ok(Self::new(d)?)
+    }
+
+    /// The first paper's test rig.
+    pub fn paper_rig() -> Self {
+        Self::parse(PAPER_RIG, "configs/gearboxes/wang2019.toml")
+            .expect("the committed paper rig description resolves")
+    }
+
+    /// The name of the gearbox.
+    pub fn name(&self) -> &str {
+        &self.description.name
+    }
+
+    /// Exact kinematics at an input-shaft rate (Hz).
+    pub fn kinematics(&self, input_hz: f64) -> Kinematics {
+        self.topology.kinematics(input_hz)
+    }
+
+    /// The reference (stage-1) mesh frequency (Hz) at an input-shaft rate (Hz).
+    pub fn f1_hz(&self, input_hz: f64) -> f64 {
+        self.kinematics(input_hz).meshes[0].hz
+    }
+
+    /// Input-shaft rates over the reference mesh frequency, per shaft (signed: +1 with the
+    /// input). With these, a shaft's rate is `ratio × f1`.
+    pub fn shaft_ratios(&self) -> std::collections::BTreeMap<String, f64> {
+        let unit = self.kinematics(1.0).meshes[0].hz;
+        self.topology.signed_rates(1.0 / unit)
+    }
+
+    /// Input-shaft rate over the reference mesh frequency (`1 / z` for a pinion on the input).
+    pub fn input_shaft_ratio(&self) -> f64 {
+        1.0 / self.kinematics(1.0).meshes[0].hz
+    }
+
+    /// `ω_h / 2π` (Hz): the reference mesh frequency at Ω1 = 1.
+    pub fn reference_frequency_hz(&self) -> f64 {
+        self.physics.reference_frequency_hz
+    }
+
+    /// Stages (1-based) whose error is the wear degree.
+    pub fn wear_stages(&self) -> Vec<usize> {
+        let mut v: Vec<usize> = self
+            .physics
+            .meshes
+            .iter()
+            .filter(|m| m.wears)
+            .map(|m| m.stage)
+            .collect();
+        v.dedup();
+        v
+    }
+
+    /// The baseline composite error of the first planetary stage's meshes in reference lengths
+    /// (the first paper's `ea_sp = ea_rp = 0.1`), `None` without a planetary stage.
+    pub fn planetary_baseline(&self) -> Option<f64> {
+        self.physics
+            .meshes
+            .iter()
+            .find(|m| m.planetary && !m.wears)
+            .map(|m| m.baseline_error_m / self.physics.length_ref_m)
+    }
+
+    /// The generic assembly for a wear state.
+    pub fn assembly(&self, wear: Wear) -> crate::error::Result<Assembly> {
+        build::assembly(self.name(), &self.physics, wear.ea, wear.planetary)
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,456 @@
+use super::*;
+use crate::model::ModelAConfig;
+
+fn parse(text: &str) -> Result<Gearbox, GearboxError> {
+    Gearbox::parse(text, "test")
+}
+
+fn close(a: f64, b: f64, rel: f64) -> bool {
+    (a - b).abs() <= rel * a.abs().max(b.abs()).max(1e-300)
+}
+
+const HEADER: &str = "format = \"gearwear-gearbox\"\nversion = 1\nname = \"t\"\n";
+
+#[test]
+fn paper_rig_resolves_to_the_hand_written_model() {
+    let gb = Gearbox::paper_rig();
+    let cfg = ModelAConfig::default_rig();
+    for (ea, pl) in [
+        (0.1, None),
+        (0.8, None),
+        (0.45, Some(0.6)),
+        (0.0, Some(0.0)),
+    ] {
+        let w = Wear { ea, planetary: pl };
+        let new = gb.assembly(w).unwrap().resolve().unwrap();
+        let old = cfg.assembly(w).unwrap().resolve().unwrap();
+        assert_eq!(new.names, old.names);
+        let n = old.n();
+        for i in 0..n {
+            for j in 0..n {
+                assert!(
+                    close(new.a[(i, j)], old.a[(i, j)], 1e-12),
+                    "A[{i},{j}] {} vs {}",
+                    new.a[(i, j)],
+                    old.a[(i, j)]
+                );
+            }
+            assert!(close(new.k_ratio[i], old.k_ratio[i], 1e-12), "k_ratio[{i}]");
+            assert!(close(new.c[i], old.c[i], 1e-12), "c[{i}]");
+            assert!(
+                (new.f[i] - old.f[i]).abs()
+                    <= 1e-12 * old.f.iter().fold(0.0_f64, |m, v| m.max(v.abs())),
+                "F[{i}] {} vs {}",
+                new.f[i],
+                old.f[i]
+            );
+            // The ratios are computed with the same operations: bit for bit.
+            assert_eq!(new.omega_ratio[i], old.omega_ratio[i], "omega_ratio[{i}]");
+            assert!(
+                close(new.backlash[i], old.backlash[i], 1e-12),
+                "backlash[{i}]"
+            );
+            assert_eq!(new.phase[i], old.phase[i]);
+            assert_eq!(new.shape[i], old.shape[i]);
+            assert_eq!(new.error[i].len(), old.error[i].len());
+            for (a, b) in new.error[i].iter().zip(&old.error[i]) {
+                assert!(close(a.amplitude, b.amplitude, 1e-12), "error[{i}]");
+                assert_eq!(a.freq_ratio, b.freq_ratio);
+            }
+        }
+        assert!(close(new.omega_h, old.omega_h, 1e-12));
+    }
+    assert_eq!(gb.reference_frequency_hz(), 870.0);
+    assert_eq!(gb.f1_hz(30.0), cfg.f1_hz(30.0));
+    assert_eq!(gb.planetary_baseline(), Some(0.1));
+    assert!(!gb.dynamics_estimated);
+    assert_eq!(gb.wear_stages(), vec![1, 2]);
+}
+
+#[test]
+fn paper_rig_table_2() {
+    let gb = Gearbox::paper_rig();
+    let k = gb.kinematics(30.0);
+    assert_eq!(k.meshes.len(), 3);
+    assert!(close(k.meshes[0].hz, 870.0, 1e-14));
+    // Table 2: f2/f1 = 0.3599 (0.36 exact), f3/f1 = 0.0877 (0.0875 exact).
+    assert!(close(k.meshes[1].hz / k.meshes[0].hz, 0.36, 1e-12));
+    assert!(close(k.meshes[2].hz / k.meshes[0].hz, 0.0875, 1e-12));
+    assert!(close(gb.mesh_ratios[1], 0.36, 1e-14) && close(gb.mesh_ratios[2], 0.0875, 1e-14));
+    // Shafts: B = 30·29/100, C = B·36/90, carrier = C·28/128.
+    assert!(close(k.shafts["B"], 8.7, 1e-14));
+    assert!(close(k.shafts["C"], 3.48, 1e-14));
+    assert!(close(k.shafts["output"], 3.48 * 28.0 / 128.0, 1e-14));
+    assert_eq!(k.shaft_directions["B"], -1);
+    assert_eq!(k.shaft_directions["C"], 1);
+    let p = &k.planetary[0];
+    assert!(close(p.planet_spin_hz, k.meshes[2].hz / 36.0, 1e-14));
+    assert!(close(p.planet_pass_hz, 4.0 * p.carrier_hz, 1e-14));
+    assert!(close(
+        k.reduction,
+        (100.0 / 29.0) * (90.0 / 36.0) * (128.0 / 28.0),
+        1e-12
+    ));
+}
+
+#[test]
+fn three_stage_parallel_box_by_hand() {
+    let text = format!(
+        "{HEADER}input_shaft = \"in\"\n\
+         [[stage]]\nkind = \"parallel\"\npinion = {{ shaft = \"in\", teeth = 20 }}\ngear = {{ shaft = \"a\", teeth = 60 }}\n\
+         [[stage]]\nkind = \"parallel\"\npinion = {{ shaft = \"a\", teeth = 15 }}\ngear = {{ shaft = \"b\", teeth = 45 }}\n\
+         [[stage]]\nkind = \"parallel\"\npinion = {{ shaft = \"b\", teeth = 12 }}\ngear = {{ shaft = \"out\", teeth = 48 }}\n"
+    );
+    let gb = parse(&text).unwrap();
+    let k = gb.kinematics(50.0);
+    // in 50 Hz → a 50·20/60 = 16.667 → b 16.667·15/45 = 5.556 → out 5.556·12/48 = 1.389.
+    assert!(close(k.shafts["a"], 50.0 / 3.0, 1e-14));
+    assert!(close(k.shafts["b"], 50.0 / 9.0, 1e-14));
+    assert!(close(k.shafts["out"], 50.0 / 36.0, 1e-14));
+    assert!(close(k.meshes[0].hz, 1000.0, 1e-14));
+    assert!(close(k.meshes[1].hz, 250.0, 1e-14));
+    assert!(close(k.meshes[2].hz, 200.0 / 3.0, 1e-14));
+    assert_eq!(k.shaft_directions["out"], -1);
+    // Hunting tooth: 1000·gcd(20,60)/(20·60) = 1000/60.
+    assert!(close(
+        k.meshes[0].hunting_tooth_hz.unwrap(),
+        1000.0 / 60.0,
+        1e-14
+    ));
+    assert_eq!(k.output_shaft, "out");
+    assert!(close(k.reduction, 36.0, 1e-12));
+    assert!(gb.dynamics_estimated);
+    assert!(gb.assumed.iter().any(|a| a.what == "stage 1 pinion module"));
+}
+
+fn planetary(fixed: &str, sun: &str, ring: &str, carrier: &str, input: &str) -> String {
+    format!(
+        "{HEADER}input_shaft = \"{input}\"\n\
+         [[stage]]\nkind = \"planetary\"\nsun = {{ {sun}teeth = 24 }}\nplanets = {{ count = 3, teeth = 18 }}\n\
+         ring = {{ {ring}teeth = 60 }}\ncarrier = {{ {carrier} }}\nfixed = \"{fixed}\"\n"
+    )
+}
+
+#[test]
+fn planetary_fixed_ring_by_hand() {
+    let gb = parse(&planetary(
+        "ring",
+        "shaft = \"s\", ",
+        "",
+        "shaft = \"c\"",
+        "s",
+    ))
+    .unwrap();
+    let k = gb.kinematics(42.0);
+    // n_c = 42·24/84 = 12; f_m = 24·(42 − 12) = 720 = 60·|0 − 12|.
+    assert!(close(k.shafts["c"], 12.0, 1e-14));
+    assert!(close(k.meshes[0].hz, 720.0, 1e-14));
+    let p = &k.planetary[0];
+    assert!(close(p.planet_spin_hz, 40.0, 1e-14));
+    assert!(close(p.planet_pass_hz, 36.0, 1e-14));
+    assert!(close(p.sun_tooth_defect_hz, 3.0 * 720.0 / 24.0, 1e-14));
+    assert!(close(p.ring_tooth_defect_hz, 3.0 * 720.0 / 60.0, 1e-14));
+    assert!(close(k.reduction, 3.5, 1e-14));
+    assert_eq!(k.shaft_directions["c"], 1);
+    // A planetary-only box wears on its own stage (no parallel stage).
+    assert_eq!(gb.wear_stages(), vec![1]);
+}
+
+#[test]
+fn star_stage_fixed_carrier_by_hand() {
+    let gb = parse(&planetary(
+        "carrier",
+        "shaft = \"s\", ",
+        "shaft = \"r\", ",
+        "",
+        "s",
+    ))
+    .unwrap();
+    let k = gb.kinematics(30.0);
+    // n_r = −30·24/60 = −12; f_m = 24·30 = 720.
+    assert!(close(k.shafts["r"], 12.0, 1e-14));
+    assert_eq!(k.shaft_directions["r"], -1);
+    assert!(close(k.meshes[0].hz, 720.0, 1e-14));
+    assert!(close(k.planetary[0].planet_pass_hz, 3.0 * 12.0, 1e-14));
+}
+
+#[test]
+fn sun_fixed_and_carrier_input() {
+    let gb = parse(&planetary(
+        "sun",
+        "",
+        "shaft = \"r\", ",
+        "shaft = \"c\"",
+        "c",
+    ))
+    .unwrap();
+    let k = gb.kinematics(10.0);
+    // n_r = n_c (zs + zr)/zr = 10·84/60 = 14; f_m = 60·|14 − 10| = 240 = 24·10.
+    assert!(close(k.shafts["r"], 14.0, 1e-14));
+    assert!(close(k.meshes[0].hz, 240.0, 1e-14));
+}
+
+/// The rigid-body mode of the assembled model is the kinematic motion: each coordinate's rate
+/// over the input's equals the kinematics' (Willis for the planetary cases).
+#[test]
+fn rigid_body_mode_follows_the_kinematics() {
+    let cases = [
+        planetary("ring", "shaft = \"s\", ", "", "shaft = \"c\"", "s"),
+        planetary("carrier", "shaft = \"s\", ", "shaft = \"r\", ", "", "s"),
+        planetary("sun", "", "shaft = \"r\", ", "shaft = \"c\"", "c"),
+        PAPER_RIG.to_string(),
+    ];
+    for text in cases {
+        // The paper's Table 1 base radii are not exactly proportional to the tooth counts
+        // (20.4 / 70.5 = 0.2894 against 29 / 100; sun 13 mm against 28 · 1 · cos 20° / 2 =
+        // 13.16 mm): its rigid mode follows the radii, up to 1.4 % off the tooth ratios.
+        let tol = if text == PAPER_RIG { 2e-2 } else { 1e-9 };
+        let gb = parse(&text).unwrap();
+        let asm = gb.assembly(Wear::fixed_axis(0.3)).unwrap();
+        let modes = asm.rigid_modes().unwrap();
+        assert_eq!(modes.ncols(), 1, "{text}");
+        let rates = gb.topology.signed_rates(1.0);
+        let input = asm
+            .dof_index(&format!("theta_{}", gb.topology.input_shaft))
+            .unwrap();
+        for shaft in &gb.topology.shafts {
+            let i = asm.dof_index(&format!("theta_{shaft}")).unwrap();
+            let ratio = modes[(i, 0)] / modes[(input, 0)];
+            // Coordinates are measured in each member's own mesh sense: magnitudes agree.
+            assert!(
+                close(ratio.abs(), rates[shaft].abs(), tol),
+                "{shaft}: mode {ratio} vs kinematics {}",
+                rates[shaft]
+            );
+        }
+    }
+}
+
+#[test]
+fn json_and_toml_give_the_same_gearbox() {
+    let toml_gb = Gearbox::paper_rig();
+    let json = serde_json::to_string_pretty(&toml_gb.description).unwrap();
+    let json_gb = parse(&json).unwrap();
+    assert_eq!(json_gb.hash, toml_gb.hash);
+    assert_eq!(json_gb.physics, toml_gb.physics);
+}
+
+#[test]
+fn a_flexible_shaft_adds_a_coordinate_and_a_shaft_element() {
+    let text = PAPER_RIG.to_string() + "\n[shafts.B]\ntorsional_stiffness_nm_per_rad = 2.0e4\n";
+    let gb = parse(&text).unwrap();
+    assert_eq!(
+        gb.physics.dofs.len(),
+        Gearbox::paper_rig().physics.dofs.len() + 1
+    );
+    assert_eq!(gb.physics.shafts.len(), 1);
+    let m = gb
+        .assembly(Wear::fixed_axis(0.5))
+        .unwrap()
+        .resolve()
+        .unwrap();
+    assert_eq!(m.n(), 11);
+}
+
+fn err(text: &str) -> GearboxError {
+    parse(text).expect_err("must be refused")
+}
+
+#[test]
+fn bad_descriptions_get_specific_errors() {
+    let par = |p: &str, g: &str| {
+        format!(
+            "{HEADER}input_shaft = \"in\"\n[[stage]]\nkind = \"parallel\"\npinion = {{ {p} }}\ngear = {{ {g} }}\n"
+        )
+    };
+    // zero and negative teeth
+    assert!(matches!(
+        err(&par(
+            "shaft = \"in\", teeth = 0",
+            "shaft = \"o\", teeth = 40"
+        )),
+        GearboxError::Teeth { teeth: 0, .. }
+    ));
+    assert!(matches!(
+        err(&par(
+            "shaft = \"in\", teeth = 20",
+            "shaft = \"o\", teeth = -3"
+        )),
+        GearboxError::Teeth { teeth: -3, .. }
+    ));
+    // a gear on no shaft
+    assert!(matches!(
+        err(&par("shaft = \"in\", teeth = 20", "teeth = 40")),
+        GearboxError::NoShaft { .. }
+    ));
+    // both gears on one shaft
+    assert!(matches!(
+        err(&par(
+            "shaft = \"in\", teeth = 20",
+            "shaft = \"in\", teeth = 40"
+        )),
+        GearboxError::SameShaft { .. }
+    ));
+    // input shaft on no stage
+    let t = par("shaft = \"a\", teeth = 20", "shaft = \"o\", teeth = 40");
+    assert!(matches!(err(&t), GearboxError::UnknownInput { .. }));
+    // not coaxial
+    let t = planetary("ring", "shaft = \"s\", ", "", "shaft = \"c\"", "s")
+        .replace("teeth = 60", "teeth = 61");
+    let e = err(&t);
+    assert!(
+        matches!(e, GearboxError::Coaxial { expected: 60, .. }),
+        "{e}"
+    );
+    assert!(e.to_string().contains("profile_shifted"));
+    // ... unless declared profile-shifted
+    assert!(
+        parse(&t.replace(
+            "fixed = \"ring\"",
+            "fixed = \"ring\"\nprofile_shifted = true"
+        ))
+        .is_ok()
+    );
+    // no member fixed / an unknown one
+    let t = planetary("ring", "shaft = \"s\", ", "", "shaft = \"c\"", "s")
+        .replace("fixed = \"ring\"\n", "");
+    assert!(matches!(err(&t), GearboxError::Fixed { .. }));
+    let t = planetary("housing", "shaft = \"s\", ", "", "shaft = \"c\"", "s");
+    assert!(matches!(err(&t), GearboxError::Fixed { .. }));
+    // two members fixed: the ring is fixed but also turns a shaft
+    let t = planetary(
+        "ring",
+        "shaft = \"s\", ",
+        "shaft = \"r\", ",
+        "shaft = \"c\"",
+        "s",
+    );
+    assert!(matches!(
+        err(&t),
+        GearboxError::FixedOnShaft { member: "ring", .. }
+    ));
+    // a stage not connected to the input
+    let t = format!(
+        "{HEADER}input_shaft = \"in\"\n\
+         [[stage]]\nkind = \"parallel\"\npinion = {{ shaft = \"in\", teeth = 20 }}\ngear = {{ shaft = \"a\", teeth = 60 }}\n\
+         [[stage]]\nkind = \"parallel\"\npinion = {{ shaft = \"x\", teeth = 15 }}\ngear = {{ shaft = \"y\", teeth = 45 }}\n"
+    );
+    assert!(matches!(
+        err(&t),
+        GearboxError::Disconnected { stage: 2, .. }
+    ));
+    // a shaft two stages disagree on (a locked loop)
+    let t = format!(
+        "{HEADER}input_shaft = \"in\"\n\
+         [[stage]]\nkind = \"parallel\"\npinion = {{ shaft = \"in\", teeth = 20 }}\ngear = {{ shaft = \"a\", teeth = 60 }}\n\
+         [[stage]]\nkind = \"parallel\"\npinion = {{ shaft = \"in\", teeth = 30 }}\ngear = {{ shaft = \"a\", teeth = 60 }}\n"
+    );
+    assert!(matches!(err(&t), GearboxError::ShaftConflict { .. }));
+    // an unknown kind, a member of the other kind, a missing member
+    assert!(matches!(
+        err(
+            &par("shaft = \"in\", teeth = 20", "shaft = \"o\", teeth = 40")
+                .replace("parallel", "bevel")
+        ),
+        GearboxError::UnknownKind { .. }
+    ));
+    let t = par("shaft = \"in\", teeth = 20", "shaft = \"o\", teeth = 40")
+        + "sun = { shaft = \"in\", teeth = 3 }\n";
+    assert!(matches!(
+        err(&t),
+        GearboxError::ForeignMember { member: "sun", .. }
+    ));
+    let t = format!(
+        "{HEADER}input_shaft = \"in\"\n[[stage]]\nkind = \"parallel\"\npinion = {{ shaft = \"in\", teeth = 20 }}\n"
+    );
+    assert!(matches!(
+        err(&t),
+        GearboxError::MissingMember { member: "gear", .. }
+    ));
+    // values out of range
+    let t = par(
+        "shaft = \"in\", teeth = 20, face_width_mm = -5",
+        "shaft = \"o\", teeth = 40",
+    );
+    assert!(matches!(err(&t), GearboxError::Value { .. }));
+    let t = par("shaft = \"in\", teeth = 20", "shaft = \"o\", teeth = 40")
+        + "mesh = { fluctuation = 1.5 }\n";
+    assert!(matches!(err(&t), GearboxError::Value { .. }));
+    // syntax, unknown field, format, version, name, no stage
+    assert!(matches!(
+        err("this is not toml ["),
+        GearboxError::Syntax { .. }
+    ));
+    let t = par(
+        "shaft = \"in\", teeth = 20, colour = \"red\"",
+        "shaft = \"o\", teeth = 40",
+    );
+    let e = err(&t);
+    assert!(
+        matches!(e, GearboxError::Syntax { .. }) && e.to_string().contains("colour"),
+        "{e}"
+    );
+    assert!(matches!(
+        err(
+            &par("shaft = \"in\", teeth = 20", "shaft = \"o\", teeth = 40")
+                .replace("gearwear-gearbox", "other")
+        ),
+        GearboxError::Format { .. }
+    ));
+    assert!(matches!(
+        err(
+            &par("shaft = \"in\", teeth = 20", "shaft = \"o\", teeth = 40")
+                .replace("version = 1", "version = 2")
+        ),
+        GearboxError::Version { found: 2 }
+    ));
+    assert!(matches!(
+        err(
+            &par("shaft = \"in\", teeth = 20", "shaft = \"o\", teeth = 40")
+                .replace("name = \"t\"", "name = \"a b/c\"")
+        ),
+        GearboxError::Name { .. }
+    ));
+    assert!(matches!(
+        err(&format!("{HEADER}input_shaft = \"in\"\nstage = []\n")),
+        GearboxError::StageCount { .. }
+    ));
+    // sensor and wear stages out of range
+    let t = par("shaft = \"in\", teeth = 20", "shaft = \"o\", teeth = 40").replace(
+        "input_shaft = \"in\"",
+        "input_shaft = \"in\"\nwear_stages = [2]",
+    );
+    assert!(matches!(err(&t), GearboxError::StageIndex { .. }));
+}
+
+#[test]
+fn unequal_planet_spacing_is_a_warning_not_an_error() {
+    // (24 + 60) / 3 = 28: equal spacing possible; 4 planets: 84/4 = 21 also. 5 planets: no.
+    let t = planetary("ring", "shaft = \"s\", ", "", "shaft = \"c\"", "s")
+        .replace("count = 3", "count = 5");
+    let gb = parse(&t).unwrap();
+    assert_eq!(gb.warnings.len(), 1, "{:?}", gb.warnings);
+}
+
+#[test]
+fn committed_descriptions_resolve() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/gearboxes");
+    let mut n = 0;
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let p = entry.unwrap().path();
+        if p.extension().is_some_and(|e| e == "toml" || e == "json") {
+            let gb = Gearbox::from_file(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+            let m = gb
+                .assembly(Wear::fixed_axis(0.5))
+                .unwrap()
+                .resolve()
+                .unwrap();
+            assert!(m.omega_h.is_finite() && m.omega_h > 0.0);
+            n += 1;
+        }
+    }
+    assert!(
+        n >= 4,
+        "the paper rig and three more descriptions are committed"
+    );
+}
