@@ -23,17 +23,14 @@
 pub mod analysis;
 pub mod cli;
 pub mod closed_loop;
-pub mod closed_loop_cli;
 pub mod configuration;
 pub mod diagnosis;
-pub mod diagnosis_cli;
 pub mod error;
 #[doc(hidden)]
 pub mod fuzzing;
 pub mod gearbox;
 pub mod keys;
 pub mod model;
-pub mod model_b_cli;
 pub mod plot;
 pub mod record;
 pub mod service;

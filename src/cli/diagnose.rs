@@ -1,15 +1,13 @@
 //! The `precompute` and `diagnose` commands (argument structs and bodies; [`crate::cli`]
 //! dispatches to them).
 
-use std::io::IsTerminal;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
-use indicatif::{ProgressBar, ProgressStyle};
 
+use super::common::{RigArgs, parse_range, progress_bar};
 use crate::analysis::bifurcation::grid;
-use crate::cli::{RigArgs, parse_range};
 use crate::diagnosis::{DiagnoseOptions, diagnose};
 use crate::record::{Column, Format, ReadOptions, read_record};
 use crate::signature::precompute::{PrecomputeSpec, partial_path, precompute};
@@ -104,22 +102,6 @@ pub struct DiagnoseArgs {
     pub config: Option<PathBuf>,
 }
 
-fn bar(len: u64, what: &str) -> ProgressBar {
-    if std::io::stderr().is_terminal() {
-        let b = ProgressBar::new(len);
-        b.set_style(
-            ProgressStyle::with_template(&format!(
-                "{{spinner}} {what} [{{bar:40}}] {{pos}}/{{len}} ({{eta}} left)"
-            ))
-            .expect("static template")
-            .progress_chars("=> "),
-        );
-        b
-    } else {
-        ProgressBar::hidden()
-    }
-}
-
 /// `gearwear precompute`.
 pub fn precompute_cmd(a: PrecomputeArgs) -> Result<()> {
     let cfg = a.rig.load()?;
@@ -177,7 +159,7 @@ pub fn precompute_cmd(a: PrecomputeArgs) -> Result<()> {
         rayon::current_num_threads(),
         partial.display()
     );
-    let pb = bar(total as u64, "grid points");
+    let pb = progress_bar(total as u64, "grid points");
     let table = precompute(&spec, Some(&partial), &|| pb.inc(1))?;
     pb.finish_and_clear();
     let json = table.to_json()?;

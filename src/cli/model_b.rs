@@ -1,12 +1,13 @@
 //! `gearwear model-b …`: the second seed's space drive (Model B). Thin wrappers around
 //! [`crate::analysis::model_b`]; `anyhow` is used here only.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use clap::{Args, Subcommand, ValueEnum};
 use serde_json::json;
 
+use super::common::write_or_print;
 use crate::analysis::model_b::{
     self, Prepared, SimSpec, SolverKind, SolverSettings, return_difference_formula,
     simulate_reversal,
@@ -114,22 +115,6 @@ pub enum ModelBCommand {
         #[arg(long)]
         output: Option<PathBuf>,
     },
-}
-
-fn write_or_print(path: Option<&Path>, text: &str) -> Result<()> {
-    match path {
-        Some(p) => {
-            if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
-                std::fs::create_dir_all(dir)
-                    .with_context(|| format!("creating {}", dir.display()))?;
-            }
-            std::fs::write(p, text).with_context(|| format!("writing {}", p.display()))
-        }
-        None => {
-            println!("{text}");
-            Ok(())
-        }
-    }
 }
 
 /// Run `gearwear model-b …`.
