@@ -21,7 +21,8 @@ use std::time::Instant;
 
 use gearwear::analysis::bifurcation::{grid, sweep};
 use gearwear::analysis::simulate::{RunSpec, Transient};
-use gearwear::model::{DimensionlessModel, ModelAConfig, Wear};
+use gearwear::gearbox::Gearbox;
+use gearwear::model::{DimensionlessModel, Wear};
 use gearwear::solver::{Integrator, Rk4, advance_to, sample_uniform};
 use rayon::prelude::*;
 
@@ -37,7 +38,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 fn model(ea: f64) -> DimensionlessModel {
-    ModelAConfig::default_rig()
+    Gearbox::paper_rig()
         .assembly(Wear::fixed_axis(ea))
         .unwrap()
         .resolve()

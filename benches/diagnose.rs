@@ -17,7 +17,8 @@ use std::time::Instant;
 mod four_sines;
 
 use gearwear::diagnosis::{DiagnoseOptions, Matcher, diagnose_with};
-use gearwear::model::{ModelAConfig, Wear};
+use gearwear::gearbox::Gearbox;
+use gearwear::model::Wear;
 use gearwear::record::Record;
 use gearwear::signature::precompute::{MeasurementSpec, simulate_measurement_with};
 use gearwear::signature::{SensorQuantity, SignatureTable, SplitMix64, mix_seed};
@@ -29,7 +30,7 @@ fn env<T: std::str::FromStr>(k: &str, d: T) -> T {
         .unwrap_or(d)
 }
 
-fn record(cfg: &ModelAConfig, ea: f64, om: f64, gain: f64, seed: u64) -> Record {
+fn record(cfg: &Gearbox, ea: f64, om: f64, gain: f64, seed: u64) -> Record {
     let model = cfg
         .assembly(Wear::fixed_axis(ea))
         .unwrap()
@@ -58,7 +59,7 @@ fn main() {
         "DIAG_TABLE",
         concat!(env!("CARGO_MANIFEST_DIR"), "/signatures/model_a_accel.json").to_string(),
     );
-    let cfg = ModelAConfig::default_rig();
+    let cfg = Gearbox::paper_rig();
     let table = SignatureTable::load(std::path::Path::new(&table_path)).expect("table loads");
     let opts = DiagnoseOptions::default();
     let t = Instant::now();
@@ -81,7 +82,7 @@ fn main() {
             let rec = record(&cfg, ea, om, gain, mix_seed(&[base, 0xACC, k as u64]));
             let known = k % 2 == 0;
             let o = DiagnoseOptions {
-                shaft_hz: known.then(|| om * cfg.reference_frequency_hz / 29.0),
+                shaft_hz: known.then(|| om * cfg.reference_frequency_hz() / cfg.f1_hz(1.0)),
                 ..opts.clone()
             };
             let d = diagnose_with(&rec, &table, &matcher, &o)

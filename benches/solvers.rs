@@ -40,8 +40,7 @@ use differential_equations::{
     status::Status,
 };
 use gearwear::model::{
-    Assembly, Damping, Dof, Element, GearOde, Load, LoadSchedule, ModelAConfig, StiffnessShape,
-    Wear,
+    Assembly, Damping, Dof, Element, GearOde, Load, LoadSchedule, StiffnessShape, Wear,
 };
 use gearwear::solver::{
     Dopri5, Dopri5Options, Integrator, OdeSystem, Rk4, advance_to, sample_uniform,
@@ -765,6 +764,7 @@ fn one_mesh_assembly(p: &OneMesh) -> Assembly {
             schedule: LoadSchedule::Constant { value: p.f },
         }],
         length_ref: 1.0,
+        sensor: 0,
     }
 }
 
@@ -963,7 +963,7 @@ fn main() {
     if want("single-mesh") {
         single_mesh();
     }
-    let model = ModelAConfig::default_rig()
+    let model = gearwear::gearbox::Gearbox::paper_rig()
         .assembly(Wear::fixed_axis(0.8))
         .unwrap()
         .resolve()

@@ -15,7 +15,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .position(|a| a == "--json")
         .and_then(|i| args.get(i + 1).cloned());
     let table = SignatureTable::load(std::path::Path::new(DEFAULT_TABLE_PATH))?;
-    let cfg = table.model.clone();
+    let cfg = table.gearbox().clone();
     let ea: f64 = std::env::var("CL_EA")
         .ok()
         .and_then(|v| v.parse().ok())
@@ -104,7 +104,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .iter()
             .map(|u| format!("{} {:.3}: {:+.1}", u.kind, u.frequency_ratio, u.size_db))
             .collect();
-        let truth_pl = effects.planetary.unwrap_or(cfg.assumed.planetary_error);
+        let truth_pl = effects
+            .planetary
+            .or(cfg.planetary_baseline())
+            .unwrap_or(0.0);
         println!(
             "| {name} | {} | {} | {:.2} | {:.2} | {:.3} | {:.3} | {:.3} | {:.2}/{:.2}/{:.2} | {secs:.1} |",
             if found.is_empty() {

@@ -26,7 +26,7 @@
 use serde::Serialize;
 
 use crate::error::{Error, Result};
-use crate::model::Frequencies;
+use crate::gearbox::Gearbox;
 use crate::record::Record;
 use crate::signal::features::{ConditionIndicators, condition_indicators};
 use crate::signal::{Spectrum, Window, amplitude_spectrum, welch};
@@ -674,15 +674,39 @@ fn refine_near(x: &[f64], fs: f64, f0: f64, half: f64) -> f64 {
 }
 
 /// Kinematic partners (name, ratio) used to recognise the stage-1 mesh line.
-fn partners(fr: &Frequencies) -> Vec<(&'static str, f64)> {
-    vec![
-        ("f2", fr.f2),
-        ("2f2", fr.two_f2),
-        ("f1-f2", fr.f1_minus_f2),
-        ("f3", fr.f3),
-        ("f1+f2", 1.0 + fr.f2),
-        ("2f1", 2.0),
-    ]
+///
+/// Every other stage's mesh line `fk` and, for a stage the wear acts on, `2fk` and `f1−fk`;
+/// then `f1+fk` of the wear stages; then `2f1` (and `3f1` for a single-stage gearbox, which has
+/// no other partner). For the first paper's rig: f2, 2f2, f1−f2, f3, f1+f2, 2f1.
+fn partners(gb: &Gearbox) -> Vec<(String, f64)> {
+    let wear = gb.wear_stages();
+    let others: Vec<(usize, f64, bool)> = gb
+        .mesh_ratios
+        .iter()
+        .enumerate()
+        .skip(1)
+        .map(|(i, r)| (i + 1, *r, wear.contains(&(i + 1))))
+        .collect();
+    let mut v = Vec::new();
+    for &(k, r, w) in &others {
+        v.push((format!("f{k}"), r));
+        if w {
+            v.push((format!("2f{k}"), 2.0 * r));
+            if r < 1.0 {
+                v.push((format!("f1-f{k}"), 1.0 - r));
+            }
+        }
+    }
+    for &(k, r, w) in &others {
+        if w {
+            v.push((format!("f1+f{k}"), 1.0 + r));
+        }
+    }
+    v.push(("2f1".into(), 2.0));
+    if others.is_empty() {
+        v.push(("3f1".into(), 3.0));
+    }
+    v
 }
 
 /// Spectrum used for the f1 search: Hann, whole record up to 2^17 samples, Welch above.
@@ -739,14 +763,14 @@ fn locate_f1(
     x: &[f64],
     fs: f64,
     spec: &SearchSpectrum,
-    fr: &Frequencies,
+    gb: &Gearbox,
     band: (f64, f64),
     nominal: Option<f64>,
 ) -> Result<(f64, F1Detection)> {
     let df = spec.freq_step;
     let tol = |f: f64| (2.0 * df).max(0.002 * f);
     let w = crate::signal::shared_window(Window::Hann, x.len());
-    let parts = partners(fr);
+    let parts = partners(gb);
     let evidence = |f: f64| -> (f64, Vec<String>) {
         let mut score = spec.prominence(f, tol(f)).clamp(0.0, 60.0);
         let mut found = Vec::new();
@@ -889,9 +913,8 @@ pub fn diagnose_with_spectrum(
     let fs = record.sample_rate;
     crate::record::check_sample_rate(fs)?;
     crate::record::check_signal(x)?;
-    let cfg = &table.model;
-    let fr = cfg.tooth_counts().frequencies();
-    let f_ref = cfg.reference_frequency_hz;
+    let gb = table.gearbox();
+    let f_ref = gb.reference_frequency_hz();
     let lines = &table.features.lines;
     let top = highest_ratio(lines);
     let (olo, ohi) = table.omega_band();
@@ -915,7 +938,7 @@ pub fn diagnose_with_spectrum(
                     "the input-shaft rate must be a positive number of Hz",
                 ));
             }
-            let f1 = cfg.f1_hz(s);
+            let f1 = gb.f1_hz(s);
             let om = f1 / f_ref;
             if om < olo - 1e-9 || om > ohi + 1e-9 {
                 return Err(Error::SpeedOutOfBand {
@@ -956,7 +979,7 @@ pub fn diagnose_with_spectrum(
         return Err(short(search.1));
     }
     let spectrum = SearchSpectrum::new(x, fs)?;
-    let (f1, detection) = locate_f1(x, fs, &spectrum, &fr, search, nominal)?;
+    let (f1, detection) = locate_f1(x, fs, &spectrum, gb, search, nominal)?;
     let omega1 = f1 / f_ref;
     // Refinement may move a peak found at the band edge a hair outside it.
     let edge = BAND_EDGE_TOLERANCE * olo;
@@ -1140,7 +1163,7 @@ pub fn diagnose_with_spectrum(
         .filter(|l| l.name != "f1" && l.name != "2f1")
         .map(|l| l.ratio * f1)
         .collect();
-    let shaft = f1 / fr.f1 * fr.shaft_in;
+    let shaft = f1 * gb.input_shaft_ratio();
     let ci = condition_indicators(x, fs, f1, shaft, &other)?;
     let coarse: Vec<(f64, f64)> = {
         // Density on a 0.01 grid (per unit ea).

@@ -8,7 +8,8 @@
 //! `docs/reliability/fuzzing.md`.
 
 use crate::configuration::{Limits, Settings};
-use crate::model::rig_a::{ModelAConfig, Wear};
+use crate::gearbox::Gearbox;
+use crate::model::Wear;
 use crate::model::rig_b::{ModelBConfig, ModelBOptions};
 use crate::record::{
     Column, Format, MAX_DECOMPRESSED_BYTES, ReadOptions, Record, gunzip, parse_record,
@@ -332,32 +333,29 @@ pub fn wav(data: &[u8]) {
     }
 }
 
-/// The model configuration files (`configs/model_a.toml`, `configs/model_b.toml`, or
-/// `--config FILE`): parse as both models and, when that succeeds, build and resolve the
-/// assembly, as `simulate`/`sweep`/`model-b` do before integrating. Checks: no panic, and a
-/// configuration that loads has positive tooth counts, finite kinematic frequencies and (if it
-/// resolves) a finite positive reference frequency.
+/// The model configuration files (gearbox descriptions `configs/gearboxes/*.toml` for
+/// `--gearbox FILE`, and `configs/model_b.toml`): parse as both and, when that succeeds, build
+/// and resolve the assembly, as `simulate`/`sweep`/`model-b` do before integrating. Checks: no
+/// panic, and a description that loads has finite positive mesh frequencies and a finite
+/// positive reference frequency.
 pub fn model_config(data: &[u8]) {
     let Ok(text) = std::str::from_utf8(data) else {
         return; // `from_file` reads with `read_to_string`, which refuses non-UTF-8.
     };
-    if let Ok(cfg) = ModelAConfig::from_toml(text, "fuzz.toml") {
-        let tc = cfg.tooth_counts();
+    if let Ok(gb) = Gearbox::parse(text, "fuzz.toml") {
         assert!(
-            tc.validate().is_ok(),
-            "model A: invalid tooth counts loaded"
+            gb.mesh_ratios.iter().all(|r| r.is_finite() && *r > 0.0),
+            "gearbox: mesh frequency ratios {:?}",
+            gb.mesh_ratios
         );
-        let fr = cfg.tooth_counts().frequencies();
-        assert!(
-            fr.f2.is_finite() && fr.f3.is_finite(),
-            "model A: non-finite mesh frequency ratios {fr:?}"
-        );
-        if let Ok(asm) = cfg.assembly(Wear::fixed_axis(0.5))
+        let f = gb.reference_frequency_hz();
+        assert!(f.is_finite() && f > 0.0, "gearbox: reference frequency {f}");
+        if let Ok(asm) = gb.assembly(Wear::fixed_axis(0.5))
             && let Ok(m) = asm.resolve()
         {
             assert!(
                 m.omega_h.is_finite() && m.omega_h > 0.0,
-                "model A: omega_h {}",
+                "gearbox: omega_h {}",
                 m.omega_h
             );
         }

@@ -22,7 +22,7 @@ fn run(effects: RigEffects, seed: u64, gain: f64) -> CalibrationReport {
         seed,
         effects,
     };
-    let rec = generate(&table.model, &spec).unwrap();
+    let rec = generate(table.gearbox(), &spec).unwrap();
     calibrate(&rec, &table, &CalibrateOptions::default()).unwrap()
 }
 

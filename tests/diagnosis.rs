@@ -7,7 +7,7 @@ use std::sync::OnceLock;
 
 use gearwear::Error;
 use gearwear::diagnosis::{DiagnoseOptions, Matcher, diagnose, diagnose_with_spectrum};
-use gearwear::model::ModelAConfig;
+use gearwear::gearbox::Gearbox;
 use gearwear::record::{Column, Format, ReadOptions, Record, encode_wav, read_record};
 use gearwear::signal::Window;
 use gearwear::signature::precompute::{MeasurementSpec, simulate_measurement};
@@ -33,7 +33,9 @@ fn tmp(name: &str) -> PathBuf {
 
 /// A synthetic record with the rig's kinematic lines at f1 (no dynamics).
 fn synthetic(f1: f64, fs: f64, seconds: f64, gain: f64) -> Record {
-    let fr = ModelAConfig::default_rig().tooth_counts().frequencies();
+    // The paper rig's line ratios: f2 = 0.36, 2f2, f3 = 0.0875, f1 − f2.
+    let r = Gearbox::paper_rig().mesh_ratios;
+    let (f2, f3) = (r[1], r[2]);
     let n = (fs * seconds) as usize;
     let mut state = 12345u64;
     let samples = (0..n)
@@ -44,10 +46,10 @@ fn synthetic(f1: f64, fs: f64, seconds: f64, gain: f64) -> Record {
                 .wrapping_add(1442695040888963407);
             let noise = ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.02;
             gain * ((TAU * f1 * t).sin()
-                + 0.2 * (TAU * fr.f2 * f1 * t).sin()
-                + 0.1 * (TAU * fr.two_f2 * f1 * t).sin()
-                + 0.05 * (TAU * fr.f3 * f1 * t).sin()
-                + 0.05 * (TAU * fr.f1_minus_f2 * f1 * t).sin()
+                + 0.2 * (TAU * f2 * f1 * t).sin()
+                + 0.1 * (TAU * 2.0 * f2 * f1 * t).sin()
+                + 0.05 * (TAU * f3 * f1 * t).sin()
+                + 0.05 * (TAU * (1.0 - f2) * f1 * t).sin()
                 + 0.3 * (TAU * 2.0 * f1 * t).sin()
                 + noise)
         })
@@ -63,14 +65,15 @@ fn the_committed_table_matches_the_current_model() {
     // Fails when configs/model_a.toml changed after the table was made: regenerate with
     // `gearwear precompute` (see signatures/README.md).
     table()
-        .check_model(&ModelAConfig::default_rig())
+        .check_model(&Gearbox::paper_rig())
         .expect("signature table is current");
 }
 
 #[test]
 fn stale_table_is_detected() {
-    let mut cfg = ModelAConfig::default_rig();
-    cfg.assumed.static_load += 0.01;
+    let mut d = Gearbox::paper_rig().description;
+    d.static_load = Some(0.16);
+    let cfg = Gearbox::new(d).unwrap();
     assert!(matches!(
         table().check_model(&cfg),
         Err(Error::StaleTable { .. })
@@ -202,7 +205,7 @@ fn the_search_spectrum_handed_back_is_the_records_hann_spectrum() {
 
 #[test]
 fn recovers_wear_on_held_out_simulations() {
-    let cfg = ModelAConfig::default_rig();
+    let cfg = Gearbox::paper_rig();
     // Seeds the table never used; off-grid ea; gains far from 1; 20 dB SNR.
     let mut inside = 0;
     let cases = [(0.23, 0.87, 1e-3), (0.64, 1.0, 50.0), (0.91, 1.13, 0.2)];
@@ -354,7 +357,7 @@ fn precompute_is_deterministic_and_resumes_from_its_partial_file() {
     use gearwear::signature::table::{Grid, SimulationSettings};
     use std::sync::atomic::{AtomicUsize, Ordering};
     let spec = PrecomputeSpec {
-        config: ModelAConfig::default_rig(),
+        gearbox: std::sync::Arc::new(Gearbox::paper_rig()),
         sensor: SensorQuantity::Accel,
         grid: Grid {
             ea: vec![0.2, 0.8],
@@ -394,5 +397,5 @@ fn precompute_is_deterministic_and_resumes_from_its_partial_file() {
     let json = a.to_json().unwrap();
     let back = SignatureTable::from_json(&json, "memory").unwrap();
     assert_eq!(back.entries.len(), 2);
-    back.check_model(&ModelAConfig::default_rig()).unwrap();
+    back.check_model(&Gearbox::paper_rig()).unwrap();
 }

@@ -482,6 +482,7 @@ impl ContactOnlyMesh {
                 schedule: LoadSchedule::Constant { value: self.f },
             }],
             length_ref: 1.0,
+            sensor: 0,
         }
     }
 }

@@ -5,9 +5,8 @@
 use std::f64::consts::TAU;
 
 use gearwear::analysis::simulate::{RunSpec, Transient, run, run_system};
-use gearwear::model::{
-    Assembly, Damping, Dof, Element, Load, LoadSchedule, ModelAConfig, StiffnessShape, Wear,
-};
+use gearwear::gearbox::{Gearbox, GearboxDescription};
+use gearwear::model::{Assembly, Damping, Dof, Element, Load, LoadSchedule, StiffnessShape, Wear};
 use gearwear::solver::{
     Dopri5, Dopri5Options, Integrator, OdeSystem, Rk4, advance_to, sample_uniform,
 };
@@ -159,6 +158,7 @@ fn one_mesh_assembly(p: &OneMesh) -> Assembly {
             schedule: LoadSchedule::Constant { value: p.f },
         }],
         length_ref: 1.0,
+        sensor: 0,
     }
 }
 
@@ -373,43 +373,62 @@ impl OdeSystem for PhysicalModelA {
 
 #[test]
 fn relative_form_matches_an_independent_physical_model() {
-    let cfg = ModelAConfig::default_rig();
     let ea = 0.6;
-    let model = cfg
+    let model = Gearbox::paper_rig()
         .assembly(Wear::fixed_axis(ea))
         .unwrap()
         .resolve()
         .unwrap();
     let omega1 = 0.9;
-    // Physical parameters from the same config, computed here by hand.
+    // Physical parameters typed in here from the paper's Table 1 and the rig description's
+    // assumed values (configs/gearboxes/wang2019.toml), independent of any parsing code.
     let mm = 1e-3;
-    let g = &cfg.gears;
     let r = [
-        g.g1.base_radius_mm * mm,
-        g.g2.base_radius_mm * mm,
-        g.g3.base_radius_mm * mm,
-        g.g4.base_radius_mm * mm,
-        g.sun.base_radius_mm * mm,
-        g.planet.base_radius_mm * mm,
-        cfg.carrier.radius_mm * mm,
+        20.4 * mm,
+        70.5 * mm,
+        25.3 * mm,
+        63.4 * mm,
+        13.0 * mm,
+        17.0 * mm,
+        30.0 * mm,
     ];
-    let jp = g.planet.inertia;
-    let jc = cfg.carrier.inertia + 4.0 * cfg.assumed.planet_mass_kg * r[6] * r[6];
+    let jp = 0.01e-3;
+    let jc = 0.76e-3 + 4.0 * 0.35 * r[6] * r[6];
     let j = [
-        g.g1.inertia,
-        g.g2.inertia + g.g3.inertia,
-        g.g4.inertia + g.sun.inertia,
+        0.05e-3,
+        6.0e-3 + 0.14e-3,
+        4.0e-3 + 0.007e-3,
         jp,
         jp,
         jp,
         jp,
         jc,
     ];
+    struct Assumed {
+        stiffness_ratio_sun_planet: f64,
+        stiffness_ratio_stage2: f64,
+        stiffness_ratio_ring_planet: f64,
+        planetary_error: f64,
+        static_load: f64,
+        fluctuation: f64,
+    }
+    let a = &Assumed {
+        stiffness_ratio_sun_planet: 0.667,
+        stiffness_ratio_stage2: 0.667,
+        stiffness_ratio_ring_planet: 0.75,
+        planetary_error: 0.1,
+        static_load: 0.15,
+        fluctuation: 0.2,
+    };
+    let (damping_ratio, length_ref_um, half_clearance) = (0.07, 5.0, 1.0);
+    // Table 2 from the tooth counts by hand: f2 = 36·(29/100)/29, f3 = 28·(nC − nc)/29.
+    let n_c_sun = (29.0 / 100.0) * (36.0 / 90.0) / 29.0;
+    let f2 = 36.0 * (29.0 / 100.0) / 29.0;
+    let f3 = 28.0 * (n_c_sun - n_c_sun * 28.0 / 128.0);
     let wh = model.omega_h;
     let a11 = r[0] * r[0] / j[0] + r[1] * r[1] / j[1];
     assert!((wh - TAU * 870.0).abs() < 1e-6 * wh);
     let k1 = wh * wh / a11;
-    let a = &cfg.assumed;
     let mut k = [k1 * a.stiffness_ratio_sun_planet; 10];
     k[0] = k1;
     k[1] = k1 * a.stiffness_ratio_stage2;
@@ -427,14 +446,13 @@ fn relative_form_matches_an_independent_physical_model() {
         }
     };
     let c: Vec<f64> = (0..10)
-        .map(|m| 2.0 * cfg.damping_ratio * (k[m] / inv_me(m)).sqrt())
+        .map(|m| 2.0 * damping_ratio * (k[m] / inv_me(m)).sqrt())
         .collect();
-    let b_ref = cfg.length_ref_um * 1e-6;
-    let fr = cfg.tooth_counts().frequencies();
+    let b_ref = length_ref_um * 1e-6;
     let wmesh = omega1 * wh; // rad/s
-    let mut w = [wmesh * fr.f3; 10];
+    let mut w = [wmesh * f3; 10];
     w[0] = wmesh;
-    w[1] = wmesh * fr.f2;
+    w[1] = wmesh * f2;
     let mut ea_v = [a.planetary_error * b_ref; 10];
     ea_v[0] = ea * b_ref;
     ea_v[1] = ea * b_ref;
@@ -446,7 +464,7 @@ fn relative_form_matches_an_independent_physical_model() {
         k,
         c: c.try_into().unwrap(),
         eps: a.fluctuation,
-        b: cfg.half_clearance * b_ref,
+        b: half_clearance * b_ref,
         w,
         ea: ea_v,
         t_in,
@@ -513,18 +531,15 @@ fn relative_form_matches_an_independent_physical_model() {
 
 #[test]
 fn model_a_a_matrix_entries_match_model_md() {
-    let cfg = ModelAConfig::default_rig();
-    let asm = cfg.assembly(Wear::fixed_axis(0.1)).unwrap();
+    let asm = Gearbox::paper_rig()
+        .assembly(Wear::fixed_axis(0.1))
+        .unwrap();
     let m = asm.resolve().unwrap();
     let mm = 1e-3;
-    let g = &cfg.gears;
-    let (r1, r2, r3) = (
-        g.g1.base_radius_mm * mm,
-        g.g2.base_radius_mm * mm,
-        g.g3.base_radius_mm * mm,
-    );
-    let jb = g.g2.inertia + g.g3.inertia;
-    let a11 = r1 * r1 / g.g1.inertia + r2 * r2 / jb;
+    // Table 1: base radii of gears 1–3, inertias of gear 1 and body B (gears 2 + 3).
+    let (r1, r2, r3) = (20.4 * mm, 70.5 * mm, 25.3 * mm);
+    let jb = 6.0e-3 + 0.14e-3;
+    let a11 = r1 * r1 / 0.05e-3 + r2 * r2 / jb;
     // Row 1 of the paper's equation: A11 = 1/me1, A12 = −r2 r3 / JB.
     assert!((m.a_ref - a11).abs() < 1e-12 * a11);
     assert!((m.a[(0, 1)] - (-r2 * r3 / jb) / a11).abs() < 1e-12);
@@ -554,19 +569,25 @@ fn model_a_a_matrix_entries_match_model_md() {
 // 3. Static deflection and the linear limit.
 // ---------------------------------------------------------------------------------------------
 
-fn linear_config() -> ModelAConfig {
-    let mut cfg = ModelAConfig::default_rig();
-    cfg.half_clearance = 0.0;
-    cfg.assumed.fluctuation = 0.0;
-    cfg
+/// The paper's rig with its description edited.
+fn rig_with(edit: impl FnOnce(&mut GearboxDescription)) -> Gearbox {
+    let mut d = Gearbox::paper_rig().description;
+    edit(&mut d);
+    Gearbox::new(d).unwrap()
+}
+
+fn linear_config() -> Gearbox {
+    rig_with(|d| {
+        d.mesh.half_clearance_um = Some(0.0);
+        d.mesh.fluctuation = Some(0.0);
+    })
 }
 
 #[test]
 fn static_deflection_matches_the_free_body_balance() {
     // No error, constant stiffness, backlash: the response settles to the static deflection
     // `x = b + F_mesh / k`, with mesh forces from torque balance body by body (not from A).
-    let mut cfg = ModelAConfig::default_rig();
-    cfg.assumed.fluctuation = 0.0;
+    let cfg = rig_with(|d| d.mesh.fluctuation = Some(0.0));
     let mut w = Wear::fixed_axis(0.0);
     w.planetary = Some(0.0);
     let model = cfg.assembly(w).unwrap().resolve().unwrap();
@@ -578,14 +599,20 @@ fn static_deflection_matches_the_free_body_balance() {
     };
     let traj = run(&model, &spec).unwrap();
     let mm = 1e-3;
-    let g = &cfg.gears;
-    let (r2, r3, r4, rs) = (
-        g.g2.base_radius_mm * mm,
-        g.g3.base_radius_mm * mm,
-        g.g4.base_radius_mm * mm,
-        g.sun.base_radius_mm * mm,
-    );
-    let a = &cfg.assumed;
+    // Table 1 base radii of gears 2, 3, 4 and the sun; the description's assumed values.
+    let (r2, r3, r4, rs) = (70.5 * mm, 25.3 * mm, 63.4 * mm, 13.0 * mm);
+    struct Assumed {
+        static_load: f64,
+        stiffness_ratio_stage2: f64,
+        stiffness_ratio_sun_planet: f64,
+        stiffness_ratio_ring_planet: f64,
+    }
+    let a = &Assumed {
+        static_load: 0.15,
+        stiffness_ratio_stage2: 0.667,
+        stiffness_ratio_sun_planet: 0.667,
+        stiffness_ratio_ring_planet: 0.75,
+    };
     let f1 = a.static_load; // F1 / (k1 b_ref)
     let f2 = f1 * r2 / r3; // body B: r2 F1 = r3 F2
     let fsp = f2 * r4 / (4.0 * rs); // body C: r4 F2 = 4 rs Fsp
@@ -710,8 +737,7 @@ fn linear_limit_matches_the_complex_frequency_response() {
 
 #[test]
 fn dopri5_agrees_with_tiny_step_rk4_on_model_a() {
-    let cfg = ModelAConfig::default_rig();
-    let model = cfg
+    let model = Gearbox::paper_rig()
         .assembly(Wear::fixed_axis(0.4))
         .unwrap()
         .resolve()
@@ -742,7 +768,7 @@ fn dopri5_agrees_with_tiny_step_rk4_on_model_a() {
 
 #[test]
 fn samples_land_on_the_requested_grid() {
-    let model = ModelAConfig::default_rig()
+    let model = Gearbox::paper_rig()
         .assembly(Wear::fixed_axis(0.3))
         .unwrap()
         .resolve()

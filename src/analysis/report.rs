@@ -7,51 +7,35 @@ use serde::Serialize;
 use super::motion::{Classification, ClassifyOptions, classify, classify_forced};
 use super::simulate::{RunSpec, Trajectory, run};
 use crate::error::Result;
-use crate::model::{DimensionlessModel, Frequencies};
+use std::collections::BTreeMap;
+
+use crate::model::DimensionlessModel;
 use crate::plot::{self, Panel, Series};
 use crate::signal::{self, Window};
 use crate::solver::Stats;
 
 /// One-sided peak amplitudes of the named lines (a sine of amplitude A reads A), in units of
 /// the analysed quantity (x̄ = deflection / b_ref for the deflections).
+/// Keyed by line name (`f1`, `f2`, `2f2`, `f1/2`, `f1-f2`, … as the gearbox's
+/// [`report_lines`](crate::gearbox::Gearbox::report_lines) name them).
 #[derive(Debug, Clone, Serialize)]
-pub struct Lines {
-    pub f1: f64,
-    pub f2: f64,
-    #[serde(rename = "2f2")]
-    pub two_f2: f64,
-    pub f3: f64,
-    #[serde(rename = "f1/2")]
-    pub half_f1: f64,
-    #[serde(rename = "f1-f2")]
-    pub f1_minus_f2: f64,
-}
+#[serde(transparent)]
+pub struct Lines(pub BTreeMap<String, f64>);
 
 impl Lines {
-    /// Measure the lines of `x`, sampled `spp` times per stage-1 mesh period (so frequencies
-    /// are in units of f1), at the kinematic ratios `fr`.
-    pub fn measure(x: &[f64], spp: f64, fr: &Frequencies) -> Result<Self> {
-        let a = |f: f64| signal::line_amplitude(x, spp, f);
-        Ok(Lines {
-            f1: a(fr.f1)?,
-            f2: a(fr.f2)?,
-            two_f2: a(fr.two_f2)?,
-            f3: a(fr.f3)?,
-            half_f1: a(fr.half_f1)?,
-            f1_minus_f2: a(fr.f1_minus_f2)?,
-        })
+    /// Measure the lines `lines` (name, ratio to f1) of `x`, sampled `spp` times per stage-1
+    /// mesh period (so frequencies are in units of f1).
+    pub fn measure(x: &[f64], spp: f64, lines: &[(String, f64)]) -> Result<Self> {
+        let mut m = BTreeMap::new();
+        for (name, r) in lines {
+            m.insert(name.clone(), signal::line_amplitude(x, spp, *r)?);
+        }
+        Ok(Lines(m))
     }
 
-    /// (label, normalised frequency) markers for plots.
-    pub fn markers(fr: &Frequencies) -> Vec<(&'static str, f64)> {
-        vec![
-            ("f1", fr.f1),
-            ("f2", fr.f2),
-            ("2f2", fr.two_f2),
-            ("f3", fr.f3),
-            ("f1/2", fr.half_f1),
-            ("f1-f2", fr.f1_minus_f2),
-        ]
+    /// The amplitude of a line by name (NaN when it was not measured).
+    pub fn get(&self, name: &str) -> f64 {
+        self.0.get(name).copied().unwrap_or(f64::NAN)
     }
 }
 
@@ -105,7 +89,7 @@ pub struct SimulationReport {
 /// Run and report on element `element` (0: x1).
 pub fn simulate_report(
     model: &DimensionlessModel,
-    fr: &Frequencies,
+    lines: &[(String, f64)],
     spec: &RunSpec,
     ea: f64,
     planetary_error: f64,
@@ -114,7 +98,7 @@ pub fn simulate_report(
     let traj = run(model, spec)?;
     let x = traj.series(element);
     let v = traj.series(model.n() + element);
-    let lines = Lines::measure(&x, traj.sample_rate_per_f1(), fr)?;
+    let lines = Lines::measure(&x, traj.sample_rate_per_f1(), lines)?;
     let poincare = traj.poincare(element);
     let sx = SeriesSummary::of(&x);
     let sv = SeriesSummary::of(&v);
@@ -154,7 +138,7 @@ pub fn plot_run(
     report: &SimulationReport,
     traj: &Trajectory,
     element: usize,
-    fr: &Frequencies,
+    lines: &[(String, f64)],
 ) -> Result<Vec<std::path::PathBuf>> {
     let n = traj.dim / 2;
     let x = traj.series(element);
@@ -166,7 +150,7 @@ pub fn plot_run(
         .collect();
     let (px, pv): (Vec<f64>, Vec<f64>) = report.poincare.iter().cloned().unzip();
     let spec = signal::amplitude_spectrum(&x, traj.sample_rate_per_f1(), Window::Hann)?;
-    let markers = Lines::markers(fr);
+    let markers: Vec<(&str, f64)> = lines.iter().map(|(n, r)| (n.as_str(), *r)).collect();
     let band = spec
         .freq
         .iter()

@@ -6,12 +6,12 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::Args;
 
+use super::common::{default_table_for, load_gearbox};
 use crate::closed_loop::{CalibrateOptions, CalibrationReport, calibrate};
 use crate::diagnosis::DiagnoseOptions;
 use crate::plot::{Panel, Series, panels};
 use crate::record::{Column, ReadOptions, read_record};
 use crate::signature::SignatureTable;
-use crate::signature::table::default_table_path;
 
 #[derive(Debug, Args)]
 pub struct CalibrateArgs {
@@ -27,9 +27,14 @@ pub struct CalibrateArgs {
     /// CSV column (0-based index or header name) or WAV channel.
     #[arg(long)]
     pub column: Option<String>,
-    /// Signature table (default: the committed `signatures/model_a_accel.json`).
+    /// Signature table (default: the gearbox's, `signatures/model_a_accel.json` for the
+    /// paper's rig).
     #[arg(long)]
     pub table: Option<PathBuf>,
+    /// Gearbox description the table must match (default: the paper's rig, or the table's own
+    /// when only --table is given).
+    #[arg(long, value_name = "FILE")]
+    pub gearbox: Option<PathBuf>,
     /// Write the JSON report here (default: stdout).
     #[arg(long)]
     pub output: Option<PathBuf>,
@@ -40,8 +45,17 @@ pub struct CalibrateArgs {
 
 /// `gearwear calibrate`.
 pub fn calibrate_cmd(a: CalibrateArgs) -> Result<()> {
-    let table_path = a.table.clone().unwrap_or_else(default_table_path);
+    let gb = match (&a.gearbox, &a.table) {
+        (None, Some(_)) => None,
+        (g, _) => Some(load_gearbox(g.as_deref())?),
+    };
+    let table_path = match (&a.table, &gb) {
+        (Some(t), _) => t.clone(),
+        (None, Some(gb)) => default_table_for(gb),
+        (None, None) => unreachable!("a gearbox is loaded when no table is given"),
+    };
     let table = SignatureTable::load(&table_path).context("loading the signature table")?;
+    table.check_model(gb.as_ref().unwrap_or(table.gearbox()))?;
     let record = read_record(
         &a.input,
         &ReadOptions {

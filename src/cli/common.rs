@@ -10,27 +10,52 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::analysis::simulate::{RunSpec, Transient};
-use crate::model::{ModelAConfig, Wear};
+use crate::gearbox::Gearbox;
+use crate::model::Wear;
 use crate::solver::Dopri5Options;
 
 /// Options shared by the simulation commands.
 #[derive(Debug, Args, Clone)]
 pub struct RigArgs {
-    /// Model A configuration file (default: the committed `configs/model_a.toml`).
-    #[arg(long)]
-    pub config: Option<PathBuf>,
-    /// Planetary composite-error amplitude (units of b); default: the configuration's 0.1.
+    /// Gearbox description, TOML or JSON (default: the first paper's rig,
+    /// `configs/gearboxes/wang2019.toml`; format in docs/gearbox.md).
+    #[arg(long, value_name = "FILE")]
+    pub gearbox: Option<PathBuf>,
+    /// Planetary composite-error amplitude (units of the reference length); default: the
+    /// description's (0.1 for the paper's rig).
     #[arg(long)]
     pub planetary_error: Option<f64>,
 }
 
 impl RigArgs {
-    pub(crate) fn load(&self) -> Result<ModelAConfig> {
-        Ok(match &self.config {
-            Some(p) => ModelAConfig::from_file(p)?,
-            None => ModelAConfig::default_rig(),
-        })
+    pub(crate) fn load(&self) -> Result<Gearbox> {
+        load_gearbox(self.gearbox.as_deref())
     }
+}
+
+/// The gearbox of a `--gearbox FILE` option (default: the first paper's rig).
+pub(crate) fn load_gearbox(path: Option<&Path>) -> Result<Gearbox> {
+    Ok(match path {
+        Some(p) => Gearbox::from_file(p)
+            .with_context(|| format!("reading the gearbox description {}", p.display()))?,
+        None => Gearbox::paper_rig(),
+    })
+}
+
+/// Where a gearbox's signature table lives by default: the committed
+/// `signatures/model_a_accel.json` for the paper's rig, `signatures/<name>.json` otherwise.
+pub(crate) fn default_table_for(gb: &Gearbox) -> PathBuf {
+    if gb.hash == Gearbox::paper_rig().hash {
+        crate::signature::table::default_table_path()
+    } else {
+        PathBuf::from(format!("signatures/{}.json", gb.name()))
+    }
+}
+
+/// The planetary error a run uses: the option's, else the gearbox's baseline (0 without a
+/// planetary stage).
+pub(crate) fn planetary_of(gb: &Gearbox, w: &Wear) -> f64 {
+    w.planetary.or(gb.planetary_baseline()).unwrap_or(0.0)
 }
 
 /// Options of the integration.

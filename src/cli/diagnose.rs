@@ -6,12 +6,14 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 
-use super::common::{RigArgs, parse_range, progress_bar};
+use super::common::{RigArgs, default_table_for, load_gearbox, parse_range, progress_bar};
 use crate::analysis::bifurcation::grid;
 use crate::diagnosis::{DiagnoseOptions, diagnose};
 use crate::record::{Column, Format, ReadOptions, read_record};
-use crate::signature::precompute::{PrecomputeSpec, partial_path, precompute};
-use crate::signature::table::{DEFAULT_TABLE_PATH, Grid, SimulationSettings, default_table_path};
+use crate::signature::precompute::{
+    PrecomputeSpec, default_grid, paper_grid, partial_path, precompute,
+};
+use crate::signature::table::{SimulationSettings, default_table_path};
 use crate::signature::{SensorQuantity, SignatureTable};
 
 /// Sensor quantity on the command line.
@@ -37,18 +39,25 @@ impl From<SensorArg> for SensorQuantity {
 
 #[derive(Debug, Args)]
 pub struct PrecomputeArgs {
-    /// Output table (JSON).
-    #[arg(long, default_value = DEFAULT_TABLE_PATH)]
-    pub output: PathBuf,
-    /// Wear-degree grid START:END:STEP (units of b = 5 µm).
-    #[arg(long, default_value = "0.1:1:0.025")]
-    pub ea: String,
-    /// Ω1 grid START:END:STEP.
-    #[arg(long, default_value = "0.5:1.6:0.05")]
-    pub omega1: String,
-    /// Random initial states (and transient lengths) per grid point.
-    #[arg(long, default_value_t = 6)]
-    pub seeds: usize,
+    /// Output table (JSON; default: `signatures/model_a_accel.json` for the paper's rig,
+    /// `signatures/<name>.json` for a described gearbox).
+    #[arg(long)]
+    pub output: Option<PathBuf>,
+    /// Wear-degree grid START:END:STEP (units of the reference length; default: the paper
+    /// rig's 0.1:1:0.025, a described gearbox's 0.1:1:0.05).
+    #[arg(long)]
+    pub ea: Option<String>,
+    /// Ω1 grid START:END:STEP (default: the paper rig's 0.5:1.6:0.05; a described gearbox's
+    /// five points over ±15 % of its nominal_input_hz, else 0.5:1.6:0.1).
+    #[arg(long, conflicts_with = "input_hz")]
+    pub omega1: Option<String>,
+    /// Input-shaft rate grid START:END:STEP in Hz, instead of --omega1.
+    #[arg(long)]
+    pub input_hz: Option<String>,
+    /// Random initial states (and transient lengths) per grid point (default: 6 for the
+    /// paper's rig, 3 for a described gearbox).
+    #[arg(long)]
+    pub seeds: Option<usize>,
     /// Retained stage-1 mesh periods per seed.
     #[arg(long, default_value_t = SimulationSettings::default().periods)]
     pub periods: usize,
@@ -88,42 +97,64 @@ pub struct DiagnoseArgs {
     /// File format (default: from the extension).
     #[arg(long, value_enum)]
     pub format: Option<FormatArg>,
-    /// Signature table (default: the committed `signatures/model_a_accel.json`).
+    /// Signature table (default: the committed `signatures/model_a_accel.json` for the paper's
+    /// rig, `signatures/<name>.json` for a described gearbox).
     #[arg(long)]
     pub table: Option<PathBuf>,
     /// Credible level of the wear interval.
     #[arg(long, default_value_t = DiagnoseOptions::default().credible_level)]
     pub level: f64,
-    /// Use a table computed for another model configuration anyway.
+    /// Use a table computed for another gearbox description anyway.
     #[arg(long)]
     pub allow_stale: bool,
-    /// Model configuration the table must match (default: the committed one).
-    #[arg(long)]
-    pub config: Option<PathBuf>,
+    /// Gearbox description the table must match (default: the table's own when --table is
+    /// given, else the paper's rig).
+    #[arg(long, value_name = "FILE")]
+    pub gearbox: Option<PathBuf>,
 }
 
 /// `gearwear precompute`.
 pub fn precompute_cmd(a: PrecomputeArgs) -> Result<()> {
-    let cfg = a.rig.load()?;
+    let gb = a.rig.load()?;
     if a.rig.planetary_error.is_some() {
         bail!(
-            "--planetary-error is not supported by precompute: the table uses the config's value"
+            "--planetary-error is not supported by precompute: the table uses the description's \
+             value (write it as the planetary stage's error_um)"
         );
     }
-    let (e0, e1, es) = parse_range(&a.ea)?;
-    let (o0, o1, os) = parse_range(&a.omega1)?;
-    let round = |v: f64| (v * 1e6).round() / 1e6;
-    let g = Grid {
-        ea: grid(e0, e1, es).into_iter().map(round).collect(),
-        omega1: grid(o0, o1, os).into_iter().map(round).collect(),
-        seeds: a.seeds,
+    let described = a.rig.gearbox.is_some();
+    let mut g = if described {
+        default_grid(&gb)
+    } else {
+        paper_grid()
     };
+    let round = |v: f64| (v * 1e6).round() / 1e6;
+    if let Some(ea) = &a.ea {
+        let (e0, e1, es) = parse_range(ea)?;
+        g.ea = grid(e0, e1, es).into_iter().map(round).collect();
+    }
+    if let Some(om) = &a.omega1 {
+        let (o0, o1, os) = parse_range(om)?;
+        g.omega1 = grid(o0, o1, os).into_iter().map(round).collect();
+    }
+    if let Some(hz) = &a.input_hz {
+        let (h0, h1, hs) = parse_range(hz)?;
+        let f_ref = gb.reference_frequency_hz();
+        g.omega1 = grid(h0, h1, hs)
+            .into_iter()
+            .map(|h| round(gb.f1_hz(h) / f_ref))
+            .collect();
+    }
+    if let Some(s) = a.seeds {
+        g.seeds = s;
+    }
     if g.ea.len() < 2 {
         bail!("the ea grid needs at least 2 values, got {:?}", g.ea);
     }
-    if a.seeds == 0 {
+    if g.seeds == 0 {
         bail!("--seeds must be at least 1");
     }
+    let output = a.output.clone().unwrap_or_else(|| default_table_for(&gb));
     let settings = SimulationSettings {
         periods: a.periods,
         ..Default::default()
@@ -139,13 +170,13 @@ pub fn precompute_cmd(a: PrecomputeArgs) -> Result<()> {
         .collect::<Vec<_>>()
         .join(" ");
     let spec = PrecomputeSpec {
-        config: cfg,
+        gearbox: std::sync::Arc::new(gb),
         sensor: a.sensor.into(),
         grid: g.clone(),
         settings,
         created_by,
     };
-    let partial = partial_path(&a.output);
+    let partial = partial_path(&output);
     if a.fresh {
         let _ = std::fs::remove_file(&partial);
     }
@@ -163,15 +194,15 @@ pub fn precompute_cmd(a: PrecomputeArgs) -> Result<()> {
     let table = precompute(&spec, Some(&partial), &|| pb.inc(1))?;
     pb.finish_and_clear();
     let json = table.to_json()?;
-    if let Some(dir) = a.output.parent().filter(|d| !d.as_os_str().is_empty()) {
+    if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
-    std::fs::write(&a.output, json).with_context(|| format!("writing {}", a.output.display()))?;
+    std::fs::write(&output, json).with_context(|| format!("writing {}", output.display()))?;
     let _ = std::fs::remove_file(&partial);
     let failed: usize = table.entries.iter().map(|e| e.failed).sum();
     eprintln!(
         "wrote {} ({} entries, {failed} failed seeds) in {:.1} s",
-        a.output.display(),
+        output.display(),
         table.entries.len(),
         table.precompute_seconds
     );
@@ -180,19 +211,30 @@ pub fn precompute_cmd(a: PrecomputeArgs) -> Result<()> {
 
 /// `gearwear diagnose`.
 pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
-    let cfg = RigArgs {
-        config: a.config.clone(),
-        planetary_error: None,
-    }
-    .load()?;
-    let table_path = a.table.clone().unwrap_or_else(default_table_path);
+    let gb = match (&a.gearbox, &a.table) {
+        (None, Some(_)) => None,
+        (g, _) => Some(load_gearbox(g.as_deref())?),
+    };
+    let table_path = match (&a.table, &gb) {
+        (Some(t), _) => t.clone(),
+        (None, Some(gb)) => default_table_for(gb),
+        (None, None) => default_table_path(),
+    };
     let table = SignatureTable::load(&table_path).with_context(|| {
         format!(
-            "loading the signature table (regenerate with `gearwear precompute --output {}`)",
+            "loading the signature table (make it with `gearwear precompute{} --output {}`)",
+            a.gearbox
+                .as_ref()
+                .map(|g| format!(" --gearbox {}", g.display()))
+                .unwrap_or_default(),
             table_path.display()
         )
     })?;
-    if let Err(e) = table.check_model(&cfg) {
+    let check = match &gb {
+        Some(gb) => table.check_model(gb),
+        None => table.check_model(table.gearbox()),
+    };
+    if let Err(e) = check {
         if a.allow_stale {
             eprintln!("warning: {e}");
         } else {

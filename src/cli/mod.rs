@@ -2,7 +2,8 @@
 //! around library functions; `main` only calls [`run`].
 //!
 //! One file per command group, each with its argument structs and bodies: [`simulate`]
-//! (`simulate`, `bifurcation`, `wear-lines`), [`model`] (`model`, `frequencies`), [`synth`],
+//! (`simulate`, `bifurcation`, `wear-lines`), [`model`] (`model`, `frequencies`), [`gearbox`],
+//! [`synth`],
 //! [`diagnose`] (`precompute`, `diagnose`), [`calibrate`] and [`model_b`]; what they share
 //! (rig and solver options, grids, output) is in [`common`], which they import and never each
 //! other. `serve` and `keys` live with the service, in [`crate::service::cli`].
@@ -13,6 +14,7 @@ use clap::{Parser, Subcommand};
 pub mod calibrate;
 pub mod common;
 pub mod diagnose;
+pub mod gearbox;
 pub mod model;
 pub mod model_b;
 pub mod simulate;
@@ -30,13 +32,16 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Simulate Model A at one (Ω1, ea): lines, motion state, plots.
+    /// Describe a gearbox: validate a description, show what it resolves to, its kinematics.
+    Gearbox(gearbox::GearboxArgs),
+    /// Simulate a gearbox (default: the first paper's rig) at one (Ω1, ea): lines, motion
+    /// state, plots.
     Simulate(simulate::SimulateArgs),
     /// Bifurcation diagram over Ω1 (the first seed's Figure 2).
     Bifurcation(simulate::BifurcationArgs),
     /// Print or export the resolved dimensionless model.
     Model(model::ModelArgs),
-    /// Characteristic frequencies of the rig (the first seed's Table 2).
+    /// Characteristic frequencies of a gearbox (the first seed's Table 2 for its rig).
     Frequencies(model::FrequenciesArgs),
     /// Line amplitudes of x̄1 versus wear at one Ω1 (the first seed's Figure 17).
     WearLines(simulate::WearLinesArgs),
@@ -60,6 +65,7 @@ pub enum Command {
 /// Run the CLI.
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
+        Command::Gearbox(a) => gearbox::run(a),
         Command::Simulate(a) => simulate::simulate_cmd(a),
         Command::Bifurcation(a) => simulate::bifurcation_cmd(a),
         Command::Model(a) => model::model_cmd(a),

@@ -1,5 +1,5 @@
-//! The `model` and `frequencies` commands: the resolved Model A and its characteristic
-//! frequencies.
+//! The `model` and `frequencies` commands: the resolved model of a gearbox and its
+//! characteristic frequencies.
 
 use std::path::PathBuf;
 
@@ -40,30 +40,47 @@ pub struct FrequenciesArgs {
 
 /// `gearwear model`.
 pub fn model_cmd(a: ModelArgs) -> Result<()> {
-    let cfg = a.rig.load()?;
-    let model = cfg.assembly(wear(&a.rig, a.ea)?)?.resolve()?;
+    let gb = a.rig.load()?;
+    let model = gb.assembly(wear(&a.rig, a.ea)?)?.resolve()?;
     let ExportFormat::Json = a.export;
-    let export = ModelExport::new(&model, &cfg);
+    let export = ModelExport::new(&model, &gb);
     write_or_print(a.output.as_deref(), &serde_json::to_string_pretty(&export)?)
 }
 
 /// `gearwear frequencies`.
 pub fn frequencies_cmd(a: FrequenciesArgs) -> Result<()> {
-    let cfg = a.rig.load()?;
-    let fr = cfg.tooth_counts().frequencies();
-    let mut v = serde_json::to_value(fr)?;
+    let gb = a.rig.load()?;
+    // Ratios to f1: the report lines, then every shaft's rate (`shaft_<name>`).
+    let mut ratios = serde_json::Map::new();
+    for (name, r) in gb.report_lines() {
+        ratios.insert(name, serde_json::json!(r));
+    }
+    for (name, r) in gb.shaft_ratios() {
+        ratios.insert(format!("shaft_{name}"), serde_json::json!(r.abs()));
+    }
+    for p in gb.kinematics(gb.input_shaft_ratio()).planetary {
+        ratios.insert(
+            format!("planet_spin_stage{}", p.stage),
+            serde_json::json!(p.planet_spin_hz),
+        );
+        ratios.insert(
+            format!("planet_pass_stage{}", p.stage),
+            serde_json::json!(p.planet_pass_hz),
+        );
+    }
+    let mut v = serde_json::json!({ "gearbox": gb.name(), "ratio_to_f1": ratios });
     if let Some(hz) = a.shaft_hz {
         if !(hz.is_finite() && hz > 0.0) {
             bail!("--shaft-hz must be a positive rate in Hz, got {hz}");
         }
-        let f1 = cfg.f1_hz(hz);
-        let abs: serde_json::Map<String, serde_json::Value> = v
-            .as_object()
-            .expect("struct serialises to an object")
+        let f1 = gb.f1_hz(hz);
+        let abs: serde_json::Map<String, serde_json::Value> = ratios
             .iter()
             .map(|(k, r)| (k.clone(), serde_json::json!(r.as_f64().unwrap_or(0.0) * f1)))
             .collect();
-        v = serde_json::json!({ "ratio_to_f1": v, "hz": abs, "shaft_hz": hz });
+        v["hz"] = serde_json::json!(abs);
+        v["shaft_hz"] = serde_json::json!(hz);
+        v["kinematics"] = serde_json::to_value(gb.kinematics(hz))?;
     }
     println!("{}", serde_json::to_string_pretty(&v)?);
     Ok(())

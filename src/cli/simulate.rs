@@ -1,5 +1,5 @@
-//! The `simulate`, `bifurcation` and `wear-lines` commands: Model A runs at one or more
-//! operating points.
+//! The `simulate`, `bifurcation` and `wear-lines` commands: runs of a gearbox's model at one
+//! or more operating points.
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -7,7 +7,9 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use anyhow::{Result, bail};
 use clap::Args;
 
-use super::common::{RigArgs, SolveArgs, parse_range, progress_bar, wear, write_or_print};
+use super::common::{
+    RigArgs, SolveArgs, parse_range, planetary_of, progress_bar, wear, write_or_print,
+};
 use crate::analysis::bifurcation::{self, grid};
 use crate::analysis::report::{plot_run, simulate_report};
 use crate::plot;
@@ -89,14 +91,14 @@ pub struct WearLinesArgs {
 
 /// `gearwear simulate`.
 pub fn simulate_cmd(a: SimulateArgs) -> Result<()> {
-    let cfg = a.rig.load()?;
+    let gb = a.rig.load()?;
     let w = wear(&a.rig, a.ea)?;
-    let model = cfg.assembly(w)?.resolve()?;
+    let model = gb.assembly(w)?.resolve()?;
     let element = model.index(&a.element)?;
-    let fr = cfg.tooth_counts().frequencies();
+    let lines = gb.report_lines();
     let spec = a.solve.spec(a.omega1);
-    let planetary = w.planetary.unwrap_or(cfg.assumed.planetary_error);
-    let (report, traj) = simulate_report(&model, &fr, &spec, a.ea, planetary, element)?;
+    let planetary = planetary_of(&gb, &w);
+    let (report, traj) = simulate_report(&model, &lines, &spec, a.ea, planetary, element)?;
     if let Some(p) = &a.csv {
         let n = model.n();
         let (x, v) = (traj.series(element), traj.series(n + element));
@@ -107,7 +109,7 @@ pub fn simulate_cmd(a: SimulateArgs) -> Result<()> {
         write_or_print(Some(p), &s)?;
     }
     if let Some(dir) = &a.plot {
-        let paths = plot_run(dir, &report, &traj, element, &fr)?;
+        let paths = plot_run(dir, &report, &traj, element, &lines)?;
         for p in paths {
             eprintln!("wrote {}", p.display());
         }
@@ -117,8 +119,8 @@ pub fn simulate_cmd(a: SimulateArgs) -> Result<()> {
 
 /// `gearwear bifurcation`.
 pub fn bifurcation_cmd(a: BifurcationArgs) -> Result<()> {
-    let cfg = a.rig.load()?;
-    let model = cfg.assembly(wear(&a.rig, a.ea)?)?.resolve()?;
+    let gb = a.rig.load()?;
+    let model = gb.assembly(wear(&a.rig, a.ea)?)?.resolve()?;
     let (start, end, step) = parse_range(&a.omega1)?;
     let omegas = grid(start, end, step);
     let elements: Vec<usize> = a
@@ -178,8 +180,8 @@ pub fn bifurcation_cmd(a: BifurcationArgs) -> Result<()> {
 /// `gearwear wear-lines`.
 pub fn wear_lines_cmd(a: WearLinesArgs) -> Result<()> {
     use rayon::prelude::*;
-    let cfg = a.rig.load()?;
-    let fr = cfg.tooth_counts().frequencies();
+    let gb = a.rig.load()?;
+    let lines = gb.report_lines();
     let (start, end, step) = parse_range(&a.ea)?;
     let eas = grid(start, end, step);
     let spec = a.solve.spec(a.omega1);
@@ -187,24 +189,23 @@ pub fn wear_lines_cmd(a: WearLinesArgs) -> Result<()> {
         .par_iter()
         .map(|&ea| -> Result<_> {
             let w = wear(&a.rig, ea)?;
-            let model = cfg.assembly(w)?.resolve()?;
+            let model = gb.assembly(w)?.resolve()?;
             let element = model.index(&a.element)?;
-            let planetary = w.planetary.unwrap_or(cfg.assumed.planetary_error);
-            Ok(simulate_report(&model, &fr, &spec, ea, planetary, element)?.0)
+            let planetary = planetary_of(&gb, &w);
+            Ok(simulate_report(&model, &lines, &spec, ea, planetary, element)?.0)
         })
         .collect::<Result<_>>()?;
-    let mut csv = String::from("ea,f1,f2,2f2,f3,f1/2,f1-f2,motion_state,lyapunov_per_period\n");
+    let names: Vec<&str> = lines.iter().map(|(n, _)| n.as_str()).collect();
+    let mut csv = format!("ea,{},motion_state,lyapunov_per_period\n", names.join(","));
     for r in &rows {
-        let l = &r.lines;
+        let amps: Vec<String> = names
+            .iter()
+            .map(|n| format!("{:.6}", r.lines.get(n)))
+            .collect();
         csv.push_str(&format!(
-            "{},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{},{}\n",
+            "{},{},{},{}\n",
             r.ea,
-            l.f1,
-            l.f2,
-            l.two_f2,
-            l.f3,
-            l.half_f1,
-            l.f1_minus_f2,
+            amps.join(","),
             r.motion_state,
             r.classification
                 .lyapunov_per_period
@@ -214,14 +215,10 @@ pub fn wear_lines_cmd(a: WearLinesArgs) -> Result<()> {
     }
     if let Some(p) = &a.plot {
         let x: Vec<f64> = rows.iter().map(|r| r.ea).collect();
-        let cols: [(&str, Vec<f64>); 6] = [
-            ("f1", rows.iter().map(|r| r.lines.f1).collect()),
-            ("f2", rows.iter().map(|r| r.lines.f2).collect()),
-            ("2f2", rows.iter().map(|r| r.lines.two_f2).collect()),
-            ("f3", rows.iter().map(|r| r.lines.f3).collect()),
-            ("f1/2", rows.iter().map(|r| r.lines.half_f1).collect()),
-            ("f1-f2", rows.iter().map(|r| r.lines.f1_minus_f2).collect()),
-        ];
+        let cols: Vec<(&str, Vec<f64>)> = names
+            .iter()
+            .map(|n| (*n, rows.iter().map(|r| r.lines.get(n)).collect()))
+            .collect();
         let series: Vec<plot::Series> = cols
             .iter()
             .map(|(l, y)| plot::Series { label: l, x: &x, y })

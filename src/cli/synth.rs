@@ -13,9 +13,13 @@ pub struct SynthArgs {
     /// Wear degree ea of the virtual gearbox.
     #[arg(long)]
     pub ea: f64,
-    /// Operating point Ω1 (1 = motor at 30 Hz on the paper's rig).
-    #[arg(long, default_value_t = 1.0)]
-    pub omega1: f64,
+    /// Operating point Ω1 (1 = motor at 30 Hz on the paper's rig; default: 1, or the
+    /// gearbox's nominal_input_hz).
+    #[arg(long, conflicts_with = "input_hz")]
+    pub omega1: Option<f64>,
+    /// Input-shaft rate in Hz, instead of --omega1.
+    #[arg(long)]
+    pub input_hz: Option<f64>,
     /// Sample rate, Hz.
     #[arg(long, default_value_t = 25600.0)]
     pub sample_rate: f64,
@@ -46,11 +50,22 @@ pub struct SynthArgs {
 
 /// `gearwear synth`.
 pub fn synth_cmd(a: SynthArgs) -> Result<()> {
-    let cfg = a.rig.load()?;
+    let gb = a.rig.load()?;
     wear(&a.rig, a.ea)?;
+    let f_ref = gb.reference_frequency_hz();
+    let omega1 = match (a.omega1, a.input_hz.or(gb.description.nominal_input_hz)) {
+        (Some(o), _) => o,
+        (None, Some(hz)) => {
+            if !(hz.is_finite() && hz > 0.0) {
+                bail!("--input-hz must be a positive rate in Hz, got {hz}");
+            }
+            gb.f1_hz(hz) / f_ref
+        }
+        (None, None) => 1.0,
+    };
     let spec = RigSpec {
         ea: a.ea,
-        omega1: a.omega1,
+        omega1,
         sample_rate: a.sample_rate,
         duration: a.duration,
         gain: a.gain,
@@ -62,7 +77,7 @@ pub fn synth_cmd(a: SynthArgs) -> Result<()> {
             ..Default::default()
         },
     };
-    let rec = generate(&cfg, &spec)?;
+    let rec = generate(&gb, &spec)?;
     let ext = a
         .output
         .extension()
@@ -105,8 +120,8 @@ pub fn synth_cmd(a: SynthArgs) -> Result<()> {
         a.output.display(),
         rec.samples.len(),
         rec.sample_rate,
-        a.omega1 * cfg.reference_frequency_hz / cfg.gears.g1.teeth as f64,
-        a.omega1 * cfg.reference_frequency_hz
+        omega1 * f_ref * gb.input_shaft_ratio(),
+        omega1 * f_ref
     );
     Ok(())
 }

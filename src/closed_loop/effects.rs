@@ -12,7 +12,8 @@ use std::collections::BTreeMap;
 use serde::Serialize;
 
 use crate::error::Result;
-use crate::model::{DimensionlessModel, ModelAConfig, Wear};
+use crate::gearbox::Gearbox;
+use crate::model::{DimensionlessModel, Wear};
 
 /// Names of the library's effects.
 pub const SHAFT_MODULATION: &str = "shaft-modulation";
@@ -62,22 +63,23 @@ impl Resonance {
     }
 }
 
-/// The input-shaft rate over f1, `1 / z1`.
-pub fn shaft_ratio(cfg: &ModelAConfig) -> f64 {
-    1.0 / cfg.gears.g1.teeth as f64
+/// The input-shaft rate over f1 (`1 / z1` for a pinion on the input shaft).
+pub fn shaft_ratio(gb: &Gearbox) -> f64 {
+    gb.input_shaft_ratio()
 }
 
-/// Resolve the Model A assembly for `p`, with the eccentricity harmonics (amplitude `e` b at
-/// `(1 ± 1/z1) f1`, phase 0) added to mesh `x1` when `e > 0`.
-pub fn build_model(cfg: &ModelAConfig, p: &ElementParams) -> Result<DimensionlessModel> {
-    let mut asm = cfg.assembly(Wear {
+/// Resolve the gearbox's assembly for `p`, with the eccentricity harmonics (amplitude `e` b at
+/// `(1 ± n_in/f1) f1`, phase 0) added to the reference mesh (`x1` of the paper's rig) when
+/// `e > 0`.
+pub fn build_model(gb: &Gearbox, p: &ElementParams) -> Result<DimensionlessModel> {
+    let mut asm = gb.assembly(Wear {
         ea: p.ea,
         planetary: Some(p.planetary),
     })?;
     if p.eccentricity > 0.0 {
-        let s = shaft_ratio(cfg);
+        let s = shaft_ratio(gb);
         let amp = p.eccentricity * asm.length_ref;
-        if let Some(el) = asm.elements.iter_mut().find(|e| e.name == "x1") {
+        if let Some(el) = asm.elements.first_mut() {
             *el = el
                 .clone()
                 .with_error(amp, 1.0 + s, 0.0)

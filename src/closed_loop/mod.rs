@@ -36,7 +36,7 @@ use serde::Serialize;
 
 use crate::diagnosis::{DiagnoseOptions, Matcher, diagnose, posterior};
 use crate::error::{Error, Result};
-use crate::model::ModelAConfig;
+use crate::gearbox::Gearbox;
 use crate::record::Record;
 use crate::signature::precompute::{SimOptions, random_initial, simulate_sensor};
 use crate::signature::{SignatureTable, SplitMix64, measure_lines};
@@ -170,7 +170,7 @@ pub struct CalibrationReport {
 
 /// Simulated model spectra, cached by parameters.
 struct Simulator<'a> {
-    cfg: &'a ModelAConfig,
+    gb: &'a Gearbox,
     omega1: f64,
     periods: usize,
     seed: u64,
@@ -188,7 +188,7 @@ impl Simulator<'_> {
         if let Some(s) = self.cache.lock().expect("cache lock").get(&key) {
             return Ok(s.clone());
         }
-        let model = build_model(self.cfg, p)?;
+        let model = build_model(self.gb, p)?;
         let mut rng = SplitMix64::new(self.seed);
         let initial = random_initial(model.n(), 2.0, self.omega1, &mut rng);
         let spp = 32usize;
@@ -450,10 +450,10 @@ struct Fitted {
     k: usize,
 }
 
-fn effect_shaft(e: f64, cfg: &ModelAConfig) -> Effect {
+fn effect_shaft(e: f64, gb: &Gearbox) -> Effect {
     let mut p = BTreeMap::new();
     p.insert("sideband_amplitude_b".into(), e);
-    p.insert("shaft_ratio".into(), shaft_ratio(cfg));
+    p.insert("shaft_ratio".into(), shaft_ratio(gb));
     Effect {
         name: SHAFT_MODULATION.into(),
         kind: "element",
@@ -493,7 +493,7 @@ pub fn calibrate(
     table: &SignatureTable,
     opts: &CalibrateOptions,
 ) -> Result<CalibrationReport> {
-    let cfg = &table.model;
+    let gb = table.gearbox();
     let d = diagnose(record, table, &opts.diagnose)?;
     let f1 = d.f1_hz;
     let (olo, ohi) = table.omega_band();
@@ -510,7 +510,7 @@ pub fn calibrate(
     let matcher = Matcher::new(table, &opts.diagnose)?;
     let feats = meas.features(lines);
 
-    let baseline_planetary = cfg.assumed.planetary_error;
+    let baseline_planetary = gb.planetary_baseline().unwrap_or(0.0);
     let wear_before = WearEstimate {
         ea: d.wear_degree.estimate,
         ea_lower: d.wear_degree.lower,
@@ -518,7 +518,7 @@ pub fn calibrate(
         planetary: baseline_planetary,
     };
     let sim = Simulator {
-        cfg,
+        gb,
         omega1,
         periods: opts.sim_periods,
         seed: opts.sim_seed,
@@ -571,13 +571,17 @@ pub fn calibrate(
 
     // Element effects: amplitude from the gap at the fingerprint lines (one probe simulation),
     // ea refined, amplitude re-fitted at the refined ea.
-    let shaft = shaft_ratio(cfg);
+    let shaft = shaft_ratio(gb);
     let sb: Vec<f64> = [1.0, 2.0]
         .iter()
         .flat_map(|c| [c - shaft, c + shaft])
         .collect();
-    let f3 = cfg.tooth_counts().frequencies().f3;
-    let fam = [f3, 2.0 * f3, 1.0 - f3, 1.0 + f3];
+    // The planetary-wear fingerprint: the first planetary stage's mesh line family (none
+    // without a planetary stage that the wear does not act on: the effect is then not tried).
+    let f3 = gb.planetary_ratio();
+    let fam: Vec<f64> = f3
+        .map(|f3| vec![f3, 2.0 * f3, 1.0 - f3, 1.0 + f3])
+        .unwrap_or_default();
     let fit_amp = |make: &dyn Fn(f64) -> ElementParams,
                    probe: f64,
                    ratios: &[f64],
@@ -625,10 +629,10 @@ pub fn calibrate(
         amp(refined)
     };
     let pe = element_fit(pn, SHAFT_MODULATION)?;
-    let pp = element_fit(pn, PLANETARY_WEAR)?;
-    let pep = ElementParams {
-        planetary: pp.planetary,
-        ..pe
+    let pp = if f3.is_some() {
+        Some(element_fit(pn, PLANETARY_WEAR)?)
+    } else {
+        None
     };
     let mut push =
         |name: String, p: ElementParams, res: Option<Resonance>, k: usize| -> Result<()> {
@@ -639,7 +643,7 @@ pub fn calibrate(
             };
             let mut effects = Vec::new();
             if p.eccentricity > 0.0 {
-                effects.push(effect_shaft(p.eccentricity, cfg));
+                effects.push(effect_shaft(p.eccentricity, gb));
             }
             if name.contains(PLANETARY_WEAR) {
                 effects.push(effect_planetary(p.planetary));
@@ -659,10 +663,18 @@ pub fn calibrate(
         };
     let res_r = cands_res(&sr_);
     push(SHAFT_MODULATION.into(), pe, None, 4)?;
-    push(PLANETARY_WEAR.into(), pp, None, 4)?;
+    if let Some(pp) = pp {
+        push(PLANETARY_WEAR.into(), pp, None, 4)?;
+    }
     push(format!("{SHAFT_MODULATION}+{PATH_RESONANCE}"), pe, res_r, 6)?;
-    push(format!("{PLANETARY_WEAR}+{PATH_RESONANCE}"), pp, res_r, 6)?;
-    push(format!("{SHAFT_MODULATION}+{PLANETARY_WEAR}"), pep, None, 5)?;
+    if let Some(pp) = pp {
+        push(format!("{PLANETARY_WEAR}+{PATH_RESONANCE}"), pp, res_r, 6)?;
+        let pep = ElementParams {
+            planetary: pp.planetary,
+            ..pe
+        };
+        push(format!("{SHAFT_MODULATION}+{PLANETARY_WEAR}"), pep, None, 5)?;
+    }
 
     // Selection.
     let bic0 = bic(cands[0].rss, 3);
@@ -797,20 +809,20 @@ pub fn refit_held(
     ea_start: f64,
     held: &held::HeldEffects,
 ) -> Result<HeldRefit> {
-    let cfg = &table.model;
+    let gb = table.gearbox();
     let (olo, ohi) = table.omega_band();
     let omega1 = omega1.clamp(olo, ohi);
     let r = grid();
     let m = log_spectrum(&record.samples, record.sample_rate, f1)?;
     let j_n = m.len() as f64;
     let sim = Simulator {
-        cfg,
+        gb,
         omega1,
         periods: opts.sim_periods,
         seed: opts.sim_seed,
         cache: Mutex::new(HashMap::new()),
     };
-    let baseline = cfg.assumed.planetary_error;
+    let baseline = gb.planetary_baseline().unwrap_or(0.0);
     let p0 = ElementParams {
         ea: ea_start,
         planetary: baseline,

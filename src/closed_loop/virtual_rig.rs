@@ -20,7 +20,7 @@ use serde::Serialize;
 
 use super::effects::{ElementParams, build_model};
 use crate::error::{Error, Result};
-use crate::model::ModelAConfig;
+use crate::gearbox::Gearbox;
 use crate::record::Record;
 use crate::signal::line_amplitude;
 use crate::signature::precompute::{SimOptions, random_initial, simulate_sensor};
@@ -60,7 +60,7 @@ pub struct RigSpec {
 }
 
 /// Generate the record of [`RigSpec`] (see the module docs for the chain).
-pub fn generate(cfg: &ModelAConfig, spec: &RigSpec) -> Result<Record> {
+pub fn generate(gb: &Gearbox, spec: &RigSpec) -> Result<Record> {
     if !(spec.sample_rate > 0.0 && spec.duration > 0.0 && spec.gain.is_finite()) {
         return Err(Error::param(
             "sample rate / duration",
@@ -70,15 +70,15 @@ pub fn generate(cfg: &ModelAConfig, spec: &RigSpec) -> Result<Record> {
     }
     let e = &spec.effects;
     let model = build_model(
-        cfg,
+        gb,
         &ElementParams {
             ea: spec.ea,
-            planetary: e.planetary.unwrap_or(cfg.assumed.planetary_error),
+            planetary: e.planetary.or(gb.planetary_baseline()).unwrap_or(0.0),
             eccentricity: e.eccentricity.unwrap_or(0.0),
         },
     )?;
     let fs = spec.sample_rate;
-    let f1 = spec.omega1 * cfg.reference_frequency_hz;
+    let f1 = spec.omega1 * gb.reference_frequency_hz();
     let mut rng = SplitMix64::new(spec.seed);
     let initial = random_initial(model.n(), 2.0, spec.omega1, &mut rng);
     let transient = 400.0 + rng.range(0.0, 200.0);

@@ -1111,6 +1111,7 @@ pub fn assembly(
         elements,
         loads,
         length_ref: b_ref,
+        sensor: p.sensor_element,
     };
     asm.validate()?;
     Ok(asm)

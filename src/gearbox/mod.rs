@@ -175,6 +175,44 @@ impl Gearbox {
             .map(|m| m.baseline_error_m / self.physics.length_ref_m)
     }
 
+    /// The lines a single run reports and the wear-lines figure draws, `(name, ratio to f1)`:
+    /// `f1`, every other stage's `fk` (and `2fk` for a wear stage), `f1/2`, and `f1−fk` for a
+    /// wear stage. For the first paper's rig: f1, f2, 2f2, f3, f1/2, f1−f2 (its Figure 17).
+    pub fn report_lines(&self) -> Vec<(String, f64)> {
+        let wear = self.wear_stages();
+        let mut v = vec![("f1".to_string(), 1.0)];
+        let others: Vec<(usize, f64)> = self
+            .mesh_ratios
+            .iter()
+            .enumerate()
+            .skip(1)
+            .map(|(i, r)| (i + 1, *r))
+            .collect();
+        for &(k, r) in &others {
+            v.push((format!("f{k}"), r));
+            if wear.contains(&k) {
+                v.push((format!("2f{k}"), 2.0 * r));
+            }
+        }
+        v.push(("f1/2".into(), 0.5));
+        for &(k, r) in &others {
+            if wear.contains(&k) && r < 1.0 {
+                v.push((format!("f1-f{k}"), 1.0 - r));
+            }
+        }
+        v
+    }
+
+    /// The ratio to f1 of the first planetary stage's mesh frequency, if there is one that the
+    /// wear does not act on (the first paper's f3).
+    pub fn planetary_ratio(&self) -> Option<f64> {
+        self.physics
+            .meshes
+            .iter()
+            .find(|m| m.planetary && !m.wears)
+            .map(|m| m.freq_ratio)
+    }
+
     /// The generic assembly for a wear state.
     pub fn assembly(&self, wear: Wear) -> crate::error::Result<Assembly> {
         build::assembly(self.name(), &self.physics, wear.ea, wear.planetary)

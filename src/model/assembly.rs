@@ -39,6 +39,10 @@ pub struct Assembly {
     pub loads: Vec<Load>,
     /// Reference length `b_ref` (m) that makes deflections dimensionless.
     pub length_ref: f64,
+    /// Index of the element whose relative motion the simulated sensor measures (0: the
+    /// reference mesh).
+    #[serde(default)]
+    pub sensor: usize,
 }
 
 impl Assembly {
@@ -182,6 +186,13 @@ impl Assembly {
                 "must be positive",
             ));
         }
+        if self.sensor >= self.elements.len() {
+            return Err(Error::InvalidConfig(format!(
+                "sensor element {} out of range ({} elements)",
+                self.sensor,
+                self.elements.len()
+            )));
+        }
         if self.elements[0].freq_ratio != 1.0 {
             return Err(Error::param(
                 "reference element frequency ratio",
@@ -297,6 +308,7 @@ impl Assembly {
             inverse_inertia: minv.iter().cloned().collect(),
             rigid_modes: rigid,
             dof_names: self.dofs.iter().map(|d| d.name.clone()).collect(),
+            sensor: self.sensor,
         })
     }
 }

@@ -4,8 +4,8 @@
 use serde::Serialize;
 
 use super::element::StiffnessShape;
-use super::rig_a::ModelAConfig;
 use super::system::DimensionlessModel;
+use crate::gearbox::{AssumedValue, Gearbox, GearboxDescription};
 
 /// Export format (version 1). Vectors follow `order`.
 #[derive(Debug, Clone, Serialize)]
@@ -35,9 +35,21 @@ pub struct ModelExport {
     pub stiffness_shape: Vec<StiffnessShape>,
     pub omega_h_rad_s: f64,
     pub length_ref_m: f64,
-    /// Ω1 = 1 corresponds to this motor rate (Hz).
+    /// Ω1 = 1 corresponds to this input-shaft rate (Hz).
     pub shaft_hz_at_omega1_1: f64,
-    pub config: ModelAConfig,
+    /// The reference (stage-1) mesh frequency at Ω1 = 1 (Hz), `ω_h / 2π`.
+    pub reference_frequency_hz: f64,
+    /// Element the simulated sensor measures.
+    pub sensor_element: String,
+    /// The gearbox description the model was built from.
+    pub config: GearboxDescription,
+    /// Its SHA-256 (the signature tables' `model_hash`).
+    pub gearbox_hash: String,
+    /// Every value the description did not give, with the rule that gave it.
+    pub assumed: Vec<AssumedValue>,
+    /// True when the dynamics rest on estimates (no stiffness, inertia or reference frequency
+    /// given): the model's resonances and so Ω1 are then uncertain.
+    pub dynamics_estimated: bool,
 }
 
 const EQUATION: &str = "x'' + A (k(tau) * f(x) + c * x') = F + e * (omega_ratio*Omega1)^2 * sin(omega_ratio*Omega1*tau + phase); \
@@ -45,8 +57,8 @@ k_j(tau) = k_ratio_j (1 + eps_j cos(omega_ratio_j*Omega1*tau + phase_j)); \
 f(x) = x - b (x > b), 0 (|x| <= b), x + b (x < -b); tau = omega_h t; x = deflection / length_ref";
 
 impl ModelExport {
-    /// Export a resolved Model A.
-    pub fn new(m: &DimensionlessModel, cfg: &ModelAConfig) -> Self {
+    /// Export the resolved model of a gearbox.
+    pub fn new(m: &DimensionlessModel, gb: &Gearbox) -> Self {
         let n = m.n();
         ModelExport {
             format: "gearwear-model/1",
@@ -84,8 +96,13 @@ impl ModelExport {
             stiffness_shape: m.shape.clone(),
             omega_h_rad_s: m.omega_h,
             length_ref_m: m.length_ref,
-            shaft_hz_at_omega1_1: cfg.reference_frequency_hz / cfg.gears.g1.teeth as f64,
-            config: cfg.clone(),
+            shaft_hz_at_omega1_1: gb.reference_frequency_hz() * gb.input_shaft_ratio(),
+            reference_frequency_hz: gb.reference_frequency_hz(),
+            sensor_element: m.names[m.sensor].clone(),
+            config: gb.description.clone(),
+            gearbox_hash: gb.hash.clone(),
+            assumed: gb.assumed.clone(),
+            dynamics_estimated: gb.dynamics_estimated,
         }
     }
 }

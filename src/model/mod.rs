@@ -17,11 +17,13 @@ pub mod reconstruct;
 pub mod rig_a;
 pub mod rig_b;
 pub mod system;
+pub mod wear;
 
 pub use assembly::Assembly;
 pub use element::{Damping, Dof, DofKind, Element, Harmonic, Load, LoadSchedule, StiffnessShape};
 pub use kinematics::{Frequencies, ToothCounts};
 pub use reconstruct::{Reconstructor, static_state};
-pub use rig_a::{ModelAConfig, Wear};
+pub use rig_a::ModelAConfig;
 pub use rig_b::{LoadCase, ModelBConfig, ModelBOptions, StiffnessForm};
 pub use system::{DimensionlessModel, GearOde, dead_zone};
+pub use wear::Wear;

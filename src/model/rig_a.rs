@@ -20,6 +20,7 @@ use serde::{Deserialize, Serialize};
 use super::assembly::Assembly;
 use super::element::{Damping, Dof, Element, Load, LoadSchedule, StiffnessShape};
 use super::kinematics::ToothCounts;
+use super::wear::Wear;
 use crate::error::{Error, Result};
 
 /// The committed default configuration (`configs/model_a.toml`).
@@ -92,25 +93,6 @@ pub struct ModelAConfig {
     pub gears: Gears,
     pub carrier: CarrierSpec,
     pub assumed: Assumed,
-}
-
-/// Operating condition of a Model A run that changes the assembly (not Ω1).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Wear {
-    /// Fixed-axis composite-error amplitude `ea1 = ea2` (units of `b_ref`).
-    pub ea: f64,
-    /// Planetary composite-error amplitude (units of `b_ref`); `None`: the configured baseline.
-    pub planetary: Option<f64>,
-}
-
-impl Wear {
-    /// Fixed-axis wear `ea` with the baseline planetary error.
-    pub fn fixed_axis(ea: f64) -> Self {
-        Wear {
-            ea,
-            planetary: None,
-        }
-    }
 }
 
 impl ModelAConfig {
@@ -305,6 +287,7 @@ impl ModelAConfig {
             elements,
             loads,
             length_ref: b_ref,
+            sensor: 0,
         };
         asm.validate()?;
         Ok(asm)

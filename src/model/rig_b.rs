@@ -492,6 +492,7 @@ impl ModelBConfig {
                 },
             ],
             length_ref: self.length_ref_um * um,
+            sensor: 0,
         };
         asm.validate()?;
         Ok(asm)

@@ -61,6 +61,8 @@ pub struct DimensionlessModel {
     /// Basis of the rigid-body modes (m × r).
     pub rigid_modes: DMatrix<f64>,
     pub dof_names: Vec<String>,
+    /// Element the simulated sensor measures (0: the reference mesh).
+    pub sensor: usize,
 }
 
 impl DimensionlessModel {

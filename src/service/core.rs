@@ -11,7 +11,7 @@ use super::diagnoser::{Diagnoser, Input, MachineCalibration, Output};
 use crate::closed_loop::held::{HeldEffects, MAX_CORRECTION_DB, decolour};
 use crate::closed_loop::{CalibrateOptions, calibrate, refit_held};
 use crate::diagnosis::{DiagnoseOptions, Matcher, diagnose_with, diagnose_with_spectrum};
-use crate::model::ModelAConfig;
+use crate::gearbox::Gearbox;
 use crate::record::Record;
 use crate::signature::SignatureTable;
 
@@ -42,7 +42,15 @@ pub fn load(path: &Path, allow_stale: bool) -> anyhow::Result<TableDiagnoser> {
             path.display()
         )
     })?;
-    if let Err(e) = table.check_model(&ModelAConfig::default_rig()) {
+    // The paper rig's table must match the committed description; any other table must at
+    // least match the description it carries.
+    let rig = Gearbox::paper_rig();
+    let check = if table.gearbox.name == rig.name() {
+        table.check_model(&rig)
+    } else {
+        table.check_model(table.gearbox())
+    };
+    if let Err(e) = check {
         if allow_stale {
             tracing::warn!(error = %e, "serving with a stale signature table");
         } else {

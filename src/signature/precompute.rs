@@ -18,11 +18,12 @@ use rayon::prelude::*;
 use super::table::{Entry, FORMAT, FeatureDefs, Grid, SimulationSettings, VERSION};
 use super::{
     BAND_HI, BAND_LO, LineDef, SEGMENT_PERIODS, SensorQuantity, SignatureTable, SplitMix64,
-    feature_names, line_set, measure_lines, mix_seed, model_hash,
+    feature_names, measure_lines, mix_seed, model_hash,
 };
 use crate::analysis::motion::{ClassifyOptions, classify};
 use crate::error::{Error, Result};
-use crate::model::{DimensionlessModel, ModelAConfig, Wear};
+use crate::gearbox::Gearbox;
+use crate::model::{DimensionlessModel, Wear};
 use crate::solver::{Dopri5, Dopri5Options, Integrator, OdeSystem, advance_to, sample_uniform};
 
 impl Default for SimulationSettings {
@@ -41,6 +42,37 @@ impl Default for SimulationSettings {
             rtol: Dopri5Options::default().rtol,
             atol: Dopri5Options::default().atol,
         }
+    }
+}
+
+/// The committed paper-rig table's grid: ea 0.1 … 1 step 0.025, Ω1 0.5 … 1.6 step 0.05, 6 seeds.
+pub fn paper_grid() -> Grid {
+    let round = |v: f64| (v * 1e6).round() / 1e6;
+    Grid {
+        ea: (0..=36).map(|k| round(0.1 + 0.025 * k as f64)).collect(),
+        omega1: (0..=22).map(|k| round(0.5 + 0.05 * k as f64)).collect(),
+        seeds: 6,
+    }
+}
+
+/// The default grid for a described gearbox: ea 0.1 … 1 step 0.05 (19 degrees), 3 seeds, and
+/// Ω1 at five input rates over ±15 % of its `nominal_input_hz` (without one: 0.5 … 1.6 step
+/// 0.1, the paper's band).
+pub fn default_grid(gb: &Gearbox) -> Grid {
+    let round = |v: f64| (v * 1e6).round() / 1e6;
+    let omega1 = match gb.description.nominal_input_hz {
+        Some(n) => {
+            let f_ref = gb.reference_frequency_hz();
+            (0..5)
+                .map(|k| round(gb.f1_hz(n * (0.85 + 0.075 * k as f64)) / f_ref))
+                .collect()
+        }
+        None => (0..=11).map(|k| round(0.5 + 0.1 * k as f64)).collect(),
+    };
+    Grid {
+        ea: (0..=18).map(|k| round(0.1 + 0.05 * k as f64)).collect(),
+        omega1,
+        seeds: 3,
     }
 }
 
@@ -125,24 +157,26 @@ pub fn simulate_sensor(
     let mut dy = vec![0.0; dim];
     let mut forces = vec![0.0; n];
     let mut finite = true;
+    // The sensor's element (0, the reference mesh, unless the gearbox places it elsewhere).
+    let s = model.sensor;
     sample_uniform(&mut integ, t0, opts.dt_tau, t_end, |k, t, y| {
         let v = match opts.sensor {
-            SensorQuantity::X1 => y[0],
+            SensorQuantity::X1 => y[s],
             SensorQuantity::Accel => {
                 sys.rhs(t, y, &mut dy);
-                dy[n]
+                dy[n + s]
             }
             SensorQuantity::MeshForce => {
                 sys.element_forces(t, y, &mut forces);
-                forces[0]
+                forces[s]
             }
         };
-        finite &= v.is_finite() && y[0].is_finite();
+        finite &= v.is_finite() && y[s].is_finite();
         series.push(v);
-        xr = (xr.0.min(y[0]), xr.1.max(y[0]));
-        vr = (vr.0.min(y[n]), vr.1.max(y[n]));
+        xr = (xr.0.min(y[s]), xr.1.max(y[s]));
+        vr = (vr.0.min(y[n + s]), vr.1.max(y[n + s]));
         if opts.poincare_every > 0 && k % opts.poincare_every == 0 {
-            poincare.push((y[0], y[n]));
+            poincare.push((y[s], y[n + s]));
         }
     })?;
     if !finite {
@@ -197,7 +231,7 @@ pub fn simulate_seed(
 /// What to precompute.
 #[derive(Debug, Clone)]
 pub struct PrecomputeSpec {
-    pub config: ModelAConfig,
+    pub gearbox: std::sync::Arc<Gearbox>,
     pub sensor: SensorQuantity,
     pub grid: Grid,
     pub settings: SimulationSettings,
@@ -207,7 +241,7 @@ pub struct PrecomputeSpec {
 impl PrecomputeSpec {
     /// Feature definitions for this configuration.
     pub fn feature_defs(&self) -> FeatureDefs {
-        let lines = line_set(&self.config.tooth_counts().frequencies());
+        let lines = super::line_set::gearbox_line_set(&self.gearbox);
         FeatureDefs {
             names: feature_names(&lines),
             lines,
@@ -227,7 +261,7 @@ impl PrecomputeSpec {
         serde_json::json!({
             "format": FORMAT,
             "version": VERSION,
-            "model_hash": model_hash(&self.config),
+            "model_hash": model_hash(&self.gearbox),
             "sensor": self.sensor,
             "grid": self.grid,
             "settings": self.settings,
@@ -303,7 +337,7 @@ pub fn precompute(
     }
     let models: Vec<DimensionlessModel> =
         g.ea.iter()
-            .map(|&ea| spec.config.assembly(Wear::fixed_axis(ea))?.resolve())
+            .map(|&ea| spec.gearbox.assembly(Wear::fixed_axis(ea))?.resolve())
             .collect::<Result<_>>()?;
     let todo: Vec<(usize, usize)> = (0..g.ea.len())
         .flat_map(|i| (0..g.omega1.len()).map(move |j| (i, j)))
@@ -375,8 +409,9 @@ pub fn precompute(
     Ok(SignatureTable {
         format: FORMAT.into(),
         version: VERSION,
-        model_hash: model_hash(&spec.config),
-        model: spec.config.clone(),
+        model_hash: model_hash(&spec.gearbox),
+        gearbox: spec.gearbox.description.clone(),
+        resolved: Some(spec.gearbox.clone()),
         sensor: spec.sensor,
         grid: spec.grid.clone(),
         simulation: spec.settings.clone(),
@@ -410,11 +445,8 @@ pub struct MeasurementSpec {
 
 /// Simulate a measured record of the configured gearbox (random initial state, transient as in
 /// the table, gain and noise applied). The sample rate must exceed 2 × the highest line.
-pub fn simulate_measurement(
-    cfg: &ModelAConfig,
-    spec: &MeasurementSpec,
-) -> Result<crate::record::Record> {
-    let model = cfg
+pub fn simulate_measurement(gb: &Gearbox, spec: &MeasurementSpec) -> Result<crate::record::Record> {
+    let model = gb
         .assembly(Wear {
             ea: spec.ea,
             planetary: spec.planetary,

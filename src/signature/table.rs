@@ -1,7 +1,7 @@
 //! The signature table: file format, loading, staleness check and derived statistics.
 //!
 //! The file is one JSON object (format `gearwear-signatures`, see `signatures/README.md`):
-//! a header (format version, model hash, the full model configuration, the sensor quantity,
+//! a header (format version, model hash, the full gearbox description, the sensor quantity,
 //! the grid, the simulation settings, the feature definitions, the creating command) and one
 //! entry per grid point `(ea, Ω1)` with the per-seed feature vectors and motion states.
 //! Statistics (mean, standard deviation) are derived at load time, so the noise-floor clipping
@@ -9,18 +9,21 @@
 
 use std::collections::BTreeMap;
 use std::path::Path;
+use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
 use super::{LineDef, SensorQuantity};
 use crate::error::{Error, Result};
-use crate::model::ModelAConfig;
+use crate::gearbox::{Gearbox, GearboxDescription};
 
 /// File format identifier.
 pub const FORMAT: &str = "gearwear-signatures";
 /// Current format version. Bump when the meaning of a field or a feature changes.
-pub const VERSION: u32 = 1;
+/// Version 2: the header carries the gearbox description (`gearbox`) instead of the Model A
+/// configuration; the paper rig's entries are unchanged (it resolves to the same model).
+pub const VERSION: u32 = 2;
 
 /// The committed default table (`signatures/model_a_accel.json`).
 pub const DEFAULT_TABLE_PATH: &str = "signatures/model_a_accel.json";
@@ -37,12 +40,15 @@ pub fn default_table_path() -> std::path::PathBuf {
     }
 }
 
-/// SHA-256 (hex) of the model configuration's canonical JSON (`serde_json` of
-/// [`ModelAConfig`], fields in declaration order, no whitespace). Any change of a parameter
-/// changes the hash.
-pub fn model_hash(cfg: &ModelAConfig) -> String {
-    let json = serde_json::to_string(cfg).unwrap_or_default();
-    let digest = Sha256::digest(json.as_bytes());
+/// SHA-256 (hex) of the gearbox description's canonical JSON (`serde_json` of
+/// [`GearboxDescription`], fields in declaration order, no whitespace): [`Gearbox::hash`]. Any
+/// change of a value in the description changes the hash.
+pub fn model_hash(gb: &Gearbox) -> String {
+    gb.hash.clone()
+}
+
+fn description_hash(d: &GearboxDescription) -> String {
+    let digest = Sha256::digest(d.canonical_json().as_bytes());
     digest.iter().map(|b| format!("{b:02x}")).collect()
 }
 
@@ -126,9 +132,13 @@ impl Entry {
 pub struct SignatureTable {
     pub format: String,
     pub version: u32,
-    /// [`model_hash`] of `model`.
+    /// [`model_hash`] of `gearbox`.
     pub model_hash: String,
-    pub model: ModelAConfig,
+    /// The gearbox the table was computed for.
+    pub gearbox: GearboxDescription,
+    /// `gearbox` resolved (set on loading and by the precompute job).
+    #[serde(skip)]
+    pub(crate) resolved: Option<Arc<Gearbox>>,
     pub sensor: SensorQuantity,
     pub grid: Grid,
     pub simulation: SimulationSettings,
@@ -191,7 +201,25 @@ impl SignatureTable {
         {
             return Err(bad("grid axes must be strictly ascending".into()));
         }
+        let mut t = t;
+        let gb = Gearbox::new(t.gearbox.clone())
+            .map_err(|e| bad(format!("its gearbox description does not resolve: {e}")))?;
+        t.resolved = Some(Arc::new(gb));
         Ok(t)
+    }
+
+    /// The resolved gearbox of the table.
+    pub fn gearbox(&self) -> &Gearbox {
+        self.resolved
+            .as_deref()
+            .expect("a loaded or precomputed table has its gearbox resolved")
+    }
+
+    /// The resolved gearbox, shared.
+    pub fn gearbox_arc(&self) -> Arc<Gearbox> {
+        self.resolved
+            .clone()
+            .expect("a loaded or precomputed table has its gearbox resolved")
     }
 
     /// Read a table file.
@@ -203,24 +231,24 @@ impl SignatureTable {
         Self::from_json(&text, &path.display().to_string())
     }
 
-    /// Read a table and refuse it if it was computed for another model configuration.
-    pub fn load_checked(path: &Path, cfg: &ModelAConfig) -> Result<Self> {
+    /// Read a table and refuse it if it was computed for another gearbox description.
+    pub fn load_checked(path: &Path, gb: &Gearbox) -> Result<Self> {
         let t = Self::load(path)?;
-        t.check_model(cfg)?;
+        t.check_model(gb)?;
         Ok(t)
     }
 
-    /// [`Error::StaleTable`] unless the table's hash is the hash of `cfg` (and of the
-    /// configuration stored in the table itself).
-    pub fn check_model(&self, cfg: &ModelAConfig) -> Result<()> {
-        let current = model_hash(cfg);
+    /// [`Error::StaleTable`] unless the table's hash is the hash of `gb` (and of the
+    /// description stored in the table itself).
+    pub fn check_model(&self, gb: &Gearbox) -> Result<()> {
+        let current = model_hash(gb);
         if self.model_hash != current {
             return Err(Error::StaleTable {
                 table_hash: self.model_hash.clone(),
                 model_hash: current,
             });
         }
-        let stored = model_hash(&self.model);
+        let stored = description_hash(&self.gearbox);
         if stored != self.model_hash {
             return Err(Error::StaleTable {
                 table_hash: self.model_hash.clone(),
@@ -294,13 +322,15 @@ mod tests {
     use super::*;
 
     #[test]
-    fn hash_changes_with_the_config() {
-        let cfg = ModelAConfig::default_rig();
-        let h = model_hash(&cfg);
+    fn hash_changes_with_the_description() {
+        let gb = Gearbox::paper_rig();
+        let h = model_hash(&gb);
         assert_eq!(h.len(), 64);
-        let mut other = cfg.clone();
-        other.assumed.static_load *= 1.01;
+        assert_eq!(h, description_hash(&gb.description));
+        let mut other = gb.description.clone();
+        other.static_load = Some(0.15 * 1.01);
+        let other = Gearbox::new(other).unwrap();
         assert_ne!(h, model_hash(&other));
-        assert_eq!(h, model_hash(&ModelAConfig::default_rig()));
+        assert_eq!(h, model_hash(&Gearbox::paper_rig()));
     }
 }

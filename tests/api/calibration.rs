@@ -5,7 +5,7 @@
 use std::sync::OnceLock;
 
 use gearwear::closed_loop::virtual_rig::{RigEffects, RigSpec, generate};
-use gearwear::model::ModelAConfig;
+use gearwear::gearbox::Gearbox;
 use serde_json::{Value, json};
 
 use crate::both_stores;
@@ -20,12 +20,13 @@ const EA: f64 = 0.3;
 const CAL: &str = "/v1/machines/{machine_id}/calibration";
 const REC: &str = "/v1/machines/{machine_id}/records";
 
-fn model() -> &'static ModelAConfig {
-    static M: OnceLock<ModelAConfig> = OnceLock::new();
+fn model() -> &'static Gearbox {
+    static M: OnceLock<Gearbox> = OnceLock::new();
     M.get_or_init(|| {
         gearwear::signature::SignatureTable::load(&gearwear::configuration::default_signatures())
             .expect("table")
-            .model
+            .gearbox()
+            .clone()
     })
 }
 
