@@ -9,7 +9,7 @@
 //!    (`f2 = 0.36 f1`, `2f2`, `f1 − f2`, `f3 = 0.0875 f1`, `f1 + f2`, `2 f1`); the best
 //!    candidate wins and is refined to the maximum of the record's Hann DTFT. `Ω1 = f1 / f_ref`.
 //! 3. **Measure** the model's lines and the gain-invariant features
-//!    ([`crate::signature::measure_lines`]; the same code made the table).
+//!    ([`crate::signal::lines::measure_lines`]; the same code made the table).
 //! 4. **Match**: a Gaussian likelihood in the clipped log-ratio features with the table's
 //!    per-grid-point mean and spread plus a measurement floor, bilinearly interpolated in
 //!    `(ea, Ω1)`, tempered, marginalised over `Ω1` with a narrow Gaussian prior around the
@@ -29,11 +29,11 @@ use crate::error::{Error, Result};
 use crate::model::Frequencies;
 use crate::record::Record;
 use crate::signal::features::{ConditionIndicators, condition_indicators};
-use crate::signal::{Spectrum, Window, amplitude_spectrum, welch};
-use crate::signature::{
-    LineDef, LineMeasurement, SEGMENT_PERIODS, SignatureTable, highest_ratio, measure_lines,
-    segment_len,
+use crate::signal::lines::{
+    LineMeasurement, SEGMENT_PERIODS, highest_ratio, measure_lines, segment_len,
 };
+use crate::signal::{Spectrum, Window, amplitude_spectrum, welch};
+use crate::signature::{LineDef, SignatureTable, line_ratios};
 
 /// Tuning of [`diagnose`]. The defaults are the calibrated values documented in
 /// `docs/diagnosis.md`.
@@ -955,6 +955,8 @@ struct Inputs<'a> {
     fr: Frequencies,
     f_ref: f64,
     lines: &'a [LineDef],
+    /// The lines' ratios to f1, in their order.
+    ratios: Vec<f64>,
     /// Highest line ratio: the sample rate must exceed `2 top f1`.
     top: f64,
     /// The table's Ω1 band, and the same in Hz of f1.
@@ -983,6 +985,7 @@ impl<'a> Inputs<'a> {
         let f_ref = cfg.reference_frequency_hz;
         let lines = &table.features.lines;
         let (olo, ohi) = table.omega_band();
+        let ratios = line_ratios(lines);
         Ok(Inputs {
             x,
             fs,
@@ -990,7 +993,8 @@ impl<'a> Inputs<'a> {
             fr: cfg.tooth_counts().frequencies(),
             f_ref,
             lines,
-            top: highest_ratio(lines),
+            top: highest_ratio(&ratios),
+            ratios,
             omega_band: (olo, ohi),
             band_hz: (olo * f_ref, ohi * f_ref),
         })
@@ -1121,7 +1125,7 @@ impl<'a> Inputs<'a> {
     /// Steps 3 and 4 at one f1: measure the lines, clip the features, the posterior over
     /// `(ea, Ω1)` and the χ² at its mode.
     fn evaluate(&self, matcher: &Matcher, opts: &DiagnoseOptions, f1: f64) -> Result<Evaluation> {
-        let meas = measure_lines(self.x, self.fs, f1, self.lines)?;
+        let meas = measure_lines(self.x, self.fs, f1, &self.ratios)?;
         let y = matcher.clip(&meas.features(self.lines));
         let post = posterior(matcher, &y, f1 / self.f_ref, opts);
         let (chi2, _) = matcher.chi2(&y, post.mode(), post.omega_mean, opts);
