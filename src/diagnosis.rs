@@ -9,7 +9,7 @@
 //!    (`f2 = 0.36 f1`, `2f2`, `f1 − f2`, `f3 = 0.0875 f1`, `f1 + f2`, `2 f1`); the best
 //!    candidate wins and is refined to the maximum of the record's Hann DTFT. `Ω1 = f1 / f_ref`.
 //! 3. **Measure** the model's lines and the gain-invariant features
-//!    ([`crate::signature::measure_lines`]; the same code made the table).
+//!    ([`crate::signal::lines::measure_lines`]; the same code made the table).
 //! 4. **Match**: a Gaussian likelihood in the clipped log-ratio features with the table's
 //!    per-grid-point mean and spread plus a measurement floor, bilinearly interpolated in
 //!    `(ea, Ω1)`, tempered, marginalised over `Ω1` with a narrow Gaussian prior around the
@@ -29,11 +29,11 @@ use crate::error::{Error, Result};
 use crate::gearbox::Gearbox;
 use crate::record::Record;
 use crate::signal::features::{ConditionIndicators, condition_indicators};
-use crate::signal::{Spectrum, Window, amplitude_spectrum, welch};
-use crate::signature::{
-    LineDef, LineMeasurement, SEGMENT_PERIODS, SignatureTable, highest_ratio, measure_lines,
-    segment_len,
+use crate::signal::lines::{
+    LineMeasurement, SEGMENT_PERIODS, highest_ratio, measure_lines, segment_len,
 };
+use crate::signal::{Spectrum, Window, amplitude_spectrum, welch};
+use crate::signature::{LineDef, SignatureTable, line_ratios};
 
 /// Tuning of [`diagnose`]. The defaults are the calibrated values documented in
 /// `docs/diagnosis.md`.
@@ -909,174 +909,343 @@ pub fn diagnose_with_spectrum(
     matcher: &Matcher,
     opts: &DiagnoseOptions,
 ) -> Result<(Diagnosis, Option<Spectrum>)> {
-    let x = &record.samples;
-    let fs = record.sample_rate;
-    crate::record::check_sample_rate(fs)?;
-    crate::record::check_signal(x)?;
-    let gb = table.gearbox();
-    let f_ref = gb.reference_frequency_hz();
-    let lines = &table.features.lines;
-    let top = highest_ratio(lines);
-    let (olo, ohi) = table.omega_band();
-    let band_hz = (olo * f_ref, ohi * f_ref);
+    let inp = Inputs::new(record, table)?;
+    let nominal = inp.nominal_f1(opts.shaft_hz)?;
     let mut warnings = Vec::new();
-    // Length check against the most lenient f1 of the band (the exact check follows).
-    let needed_for = |f1: f64| segment_len(fs, f1).max(16);
-    let short = |f1: f64| Error::RecordTooShort {
-        samples: x.len(),
-        periods: x.len() as f64 * f1 / fs,
-        f1_hz: f1,
-        needed_periods: SEGMENT_PERIODS as usize,
-        needed_samples: needed_for(f1),
-    };
-    let nominal = match opts.shaft_hz {
-        Some(s) => {
-            if !(s.is_finite() && s > 0.0) {
-                return Err(Error::param(
-                    "shaft_hz",
-                    s,
-                    "the input-shaft rate must be a positive number of Hz",
-                ));
-            }
-            let f1 = gb.f1_hz(s);
-            let om = f1 / f_ref;
-            if om < olo - 1e-9 || om > ohi + 1e-9 {
-                return Err(Error::SpeedOutOfBand {
-                    f1_hz: f1,
-                    omega1: om,
-                    min: olo,
-                    max: ohi,
-                    min_hz: band_hz.0,
-                    max_hz: band_hz.1,
-                });
-            }
-            if 2.0 * top * f1 >= fs {
-                return Err(Error::SampleRateTooLow {
-                    sample_rate: fs,
-                    highest_line_hz: top * f1,
-                    needed: 2.0 * top * f1,
-                });
-            }
-            if x.len() < needed_for(f1) {
-                return Err(short(f1));
-            }
-            Some(f1)
-        }
-        None => {
-            if 2.0 * top * band_hz.0 >= fs {
-                return Err(Error::SampleRateTooLow {
-                    sample_rate: fs,
-                    highest_line_hz: top * band_hz.0,
-                    needed: 2.0 * top * band_hz.0,
-                });
-            }
-            None
-        }
-    };
-    // The search band: the table's, limited by what the sample rate can carry.
-    let search = (band_hz.0, band_hz.1.min(0.999 * fs / (2.0 * top)));
-    if x.len() < needed_for(search.1) {
-        return Err(short(search.1));
-    }
-    let spectrum = SearchSpectrum::new(x, fs)?;
-    let (f1, detection) = locate_f1(x, fs, &spectrum, gb, search, nominal)?;
-    let omega1 = f1 / f_ref;
-    // Refinement may move a peak found at the band edge a hair outside it.
-    let edge = BAND_EDGE_TOLERANCE * olo;
-    if omega1 < olo - edge || omega1 > ohi + edge {
-        return Err(Error::SpeedOutOfBand {
-            f1_hz: f1,
-            omega1,
-            min: olo,
-            max: ohi,
-            min_hz: band_hz.0,
-            max_hz: band_hz.1,
-        });
-    }
-    if x.len() < needed_for(f1) {
-        return Err(short(f1));
-    }
-    if detection.prominence_db < 10.0 {
-        warnings.push(format!(
-            "the f1 line at {f1:.2} Hz stands only {:.1} dB over the local floor",
-            detection.prominence_db
-        ));
-    }
-    if detection.method == "spectrum" && detection.partners_found.len() < 2 {
-        warnings.push(format!(
-            "tacho-less f1 = {f1:.2} Hz has only {} kinematic partner line(s) of this rig \
-             ({:?}); the record may come from another gearbox or f1 may be wrong",
-            detection.partners_found.len(),
-            detection.partners_found
-        ));
-    }
-    let evaluate = |f1: f64| -> Result<(LineMeasurement, Vec<f64>, Posterior, f64)> {
-        let meas = measure_lines(x, fs, f1, lines)?;
-        let y = matcher.clip(&meas.features(lines));
-        let post = posterior(matcher, &y, f1 / f_ref, opts);
-        let (chi2, _) = matcher.chi2(&y, post.mode(), post.omega_mean, opts);
-        Ok((meas, y, post, chi2))
-    };
-    let (mut f1, mut omega1, mut detection) = (f1, omega1, detection);
-    let (mut meas, mut y, mut post, mut chi2) = evaluate(f1)?;
+    let (mut f1, mut detection, spectrum) = inp.locate(nominal, &mut warnings)?;
+    let mut ev = inp.evaluate(matcher, opts, f1)?;
     let nfeat = matcher.wear_features.len();
     if detection.method == "spectrum"
-        && nan_or_above(chi2 / nfeat.max(1) as f64, opts.reselect_chi2_per_feature)
+        && nan_or_above(
+            ev.chi2 / nfeat.max(1) as f64,
+            opts.reselect_chi2_per_feature,
+        )
     {
-        // Tacho-less and the model explains the record worse than it explains its own
-        // simulations: maybe the wrong peak won (a harmonic or subharmonic of f1). Try the other
-        // spectral candidates and keep the one the model explains best.
+        f1 = inp.reselect_f1(matcher, opts, f1, &mut detection, &mut ev, &mut warnings);
+    }
+    let omega1 = f1 / inp.f_ref;
+    let fit = fit_and_inflate(matcher, opts, &mut ev, omega1, &mut warnings);
+    let wear = wear_degree(&ev.post, opts.credible_level);
+    let i_om = nearest(&table.grid.omega1, omega1);
+    let (motion_state, share) =
+        motion_state_at(table, nearest(&table.grid.ea, wear.estimate), i_om);
+    let near = nearest_entries(table, matcher, &ev.y, i_om, opts);
+    let planetary = planetary_check(matcher, &ev.y, wear.estimate, omega1, opts);
+    let out_lines = matched_lines(inp.lines, &ev.meas, matcher, wear.estimate, omega1, f1);
+    let shaft = f1 * inp.gb.input_shaft_ratio();
+    let ci = inp.condition_indicators(f1, shaft)?;
+    let x = inp.x;
+    let fs = inp.fs;
+    let diagnosis = Diagnosis {
+        wear_degree: wear,
+        f1_hz: f1,
+        shaft_hz: shaft,
+        omega1,
+        omega1_posterior: ev.post.omega_mean,
+        f1_detection: detection,
+        motion_state,
+        motion_state_share: share,
+        planetary_clearance_elevated: planetary.z > opts.planetary_z,
+        planetary,
+        lines: out_lines,
+        condition_indicators: ci,
+        nearest_entries: near,
+        posterior: coarse_density(&ev.post),
+        fit,
+        baseline_single_ratio: Baseline {
+            method: "paper: ea whose table mean ln(A_f2/A_f1) at the measured Ω1 is closest",
+            ea: matcher.baseline(&ev.y, omega1, opts.ea_step),
+        },
+        record: RecordInfo {
+            samples: x.len(),
+            sample_rate_hz: fs,
+            duration_s: x.len() as f64 / fs,
+            f1_periods: x.len() as f64 * f1 / fs,
+            welch_segments: ev.meas.segments,
+            segment_len: ev.meas.segment_len,
+        },
+        table_model_hash: table.model_hash.clone(),
+        sensor: table.sensor.label().into(),
+        warnings,
+    };
+    Ok((diagnosis, spectrum.into_whole()))
+}
+
+/// The record and the table's facts that the steps of [`diagnose_with_spectrum`] share.
+struct Inputs<'a> {
+    x: &'a [f64],
+    fs: f64,
+    gb: &'a Gearbox,
+    f_ref: f64,
+    lines: &'a [LineDef],
+    /// The lines' ratios to f1, in their order.
+    ratios: Vec<f64>,
+    /// Highest line ratio: the sample rate must exceed `2 top f1`.
+    top: f64,
+    /// The table's Ω1 band, and the same in Hz of f1.
+    omega_band: (f64, f64),
+    band_hz: (f64, f64),
+}
+
+/// The lines measured at one f1 and what the matcher makes of them (steps 3 and 4).
+struct Evaluation {
+    meas: LineMeasurement,
+    /// The clipped features.
+    y: Vec<f64>,
+    post: Posterior,
+    /// χ² of the wear features at the posterior mode.
+    chi2: f64,
+}
+
+impl<'a> Inputs<'a> {
+    /// Step 1: validate the record (sample rate, samples) and gather the table's facts.
+    fn new(record: &'a Record, table: &'a SignatureTable) -> Result<Self> {
+        let x = &record.samples;
+        let fs = record.sample_rate;
+        crate::record::check_sample_rate(fs)?;
+        crate::record::check_signal(x)?;
+        let gb = table.gearbox();
+        let f_ref = gb.reference_frequency_hz();
+        let lines = &table.features.lines;
+        let (olo, ohi) = table.omega_band();
+        let ratios = line_ratios(lines);
+        Ok(Inputs {
+            x,
+            fs,
+            gb,
+            f_ref,
+            lines,
+            top: highest_ratio(&ratios),
+            ratios,
+            omega_band: (olo, ohi),
+            band_hz: (olo * f_ref, ohi * f_ref),
+        })
+    }
+
+    /// Refuse a record shorter than one estimator segment at `f1`.
+    fn check_length(&self, f1: f64) -> Result<()> {
+        let needed = segment_len(self.fs, f1).max(16);
+        if self.x.len() < needed {
+            return Err(Error::RecordTooShort {
+                samples: self.x.len(),
+                periods: self.x.len() as f64 * f1 / self.fs,
+                f1_hz: f1,
+                needed_periods: SEGMENT_PERIODS as usize,
+                needed_samples: needed,
+            });
+        }
+        Ok(())
+    }
+
+    /// True when `2 top f1` reaches the sample rate.
+    fn rate_too_low_for(&self, f1: f64) -> bool {
+        2.0 * self.top * f1 >= self.fs
+    }
+
+    fn rate_too_low(&self, f1: f64) -> Error {
+        Error::SampleRateTooLow {
+            sample_rate: self.fs,
+            highest_line_hz: self.top * f1,
+            needed: 2.0 * self.top * f1,
+        }
+    }
+
+    /// True when `omega1` is more than `tol` outside the table's Ω1 band.
+    fn outside_band(&self, omega1: f64, tol: f64) -> bool {
+        omega1 < self.omega_band.0 - tol || omega1 > self.omega_band.1 + tol
+    }
+
+    fn out_of_band(&self, f1: f64, omega1: f64) -> Error {
+        Error::SpeedOutOfBand {
+            f1_hz: f1,
+            omega1,
+            min: self.omega_band.0,
+            max: self.omega_band.1,
+            min_hz: self.band_hz.0,
+            max_hz: self.band_hz.1,
+        }
+    }
+
+    /// How far a refined f1 may stand outside the band (Ω1 units).
+    fn edge(&self) -> f64 {
+        BAND_EDGE_TOLERANCE * self.omega_band.0
+    }
+
+    /// Step 1, the shaft rate: the f1 it implies, refused outside the table's band, above what
+    /// the sample rate carries or with too short a record. Without a shaft rate, the sample rate
+    /// must carry the lines at the band's lowest f1.
+    fn nominal_f1(&self, shaft_hz: Option<f64>) -> Result<Option<f64>> {
+        match shaft_hz {
+            Some(s) => {
+                if !(s.is_finite() && s > 0.0) {
+                    return Err(Error::param(
+                        "shaft_hz",
+                        s,
+                        "the input-shaft rate must be a positive number of Hz",
+                    ));
+                }
+                let f1 = self.gb.f1_hz(s);
+                let om = f1 / self.f_ref;
+                if self.outside_band(om, 1e-9) {
+                    return Err(self.out_of_band(f1, om));
+                }
+                if self.rate_too_low_for(f1) {
+                    return Err(self.rate_too_low(f1));
+                }
+                self.check_length(f1)?;
+                Ok(Some(f1))
+            }
+            None => {
+                if self.rate_too_low_for(self.band_hz.0) {
+                    return Err(self.rate_too_low(self.band_hz.0));
+                }
+                Ok(None)
+            }
+        }
+    }
+
+    /// Step 2: locate f1 in the search band (the table's, limited by what the sample rate can
+    /// carry), refuse it outside the band or with too short a record, and warn about a weak f1
+    /// line or one without kinematic partners. Also returns the spectrum the search used.
+    fn locate(
+        &self,
+        nominal: Option<f64>,
+        warnings: &mut Vec<String>,
+    ) -> Result<(f64, F1Detection, SearchSpectrum)> {
+        let (x, fs) = (self.x, self.fs);
+        let search = (
+            self.band_hz.0,
+            self.band_hz.1.min(0.999 * fs / (2.0 * self.top)),
+        );
+        // Length check against the most lenient f1 of the band (the exact check follows).
+        self.check_length(search.1)?;
+        let spectrum = SearchSpectrum::new(x, fs)?;
+        let (f1, detection) = locate_f1(x, fs, &spectrum, self.gb, search, nominal)?;
+        let omega1 = f1 / self.f_ref;
+        // Refinement may move a peak found at the band edge a hair outside it.
+        if self.outside_band(omega1, self.edge()) {
+            return Err(self.out_of_band(f1, omega1));
+        }
+        self.check_length(f1)?;
+        if detection.prominence_db < 10.0 {
+            warnings.push(format!(
+                "the f1 line at {f1:.2} Hz stands only {:.1} dB over the local floor",
+                detection.prominence_db
+            ));
+        }
+        if detection.method == "spectrum" && detection.partners_found.len() < 2 {
+            warnings.push(format!(
+                "tacho-less f1 = {f1:.2} Hz has only {} kinematic partner line(s) of this rig \
+                 ({:?}); the record may come from another gearbox or f1 may be wrong",
+                detection.partners_found.len(),
+                detection.partners_found
+            ));
+        }
+        Ok((f1, detection, spectrum))
+    }
+
+    /// Steps 3 and 4 at one f1: measure the lines, clip the features, the posterior over
+    /// `(ea, Ω1)` and the χ² at its mode.
+    fn evaluate(&self, matcher: &Matcher, opts: &DiagnoseOptions, f1: f64) -> Result<Evaluation> {
+        let meas = measure_lines(self.x, self.fs, f1, &self.ratios)?;
+        let y = matcher.clip(&meas.features(self.lines));
+        let post = posterior(matcher, &y, f1 / self.f_ref, opts);
+        let (chi2, _) = matcher.chi2(&y, post.mode(), post.omega_mean, opts);
+        Ok(Evaluation {
+            meas,
+            y,
+            post,
+            chi2,
+        })
+    }
+
+    /// Tacho-less and the model explains the record worse than it explains its own
+    /// simulations: maybe the wrong peak won (a harmonic or subharmonic of f1). Try the other
+    /// spectral candidates and keep the one the model explains best: `ev`, `detection` and a
+    /// warning are updated when one is chosen. Returns the f1 kept.
+    fn reselect_f1(
+        &self,
+        matcher: &Matcher,
+        opts: &DiagnoseOptions,
+        f1: f64,
+        detection: &mut F1Detection,
+        ev: &mut Evaluation,
+        warnings: &mut Vec<String>,
+    ) -> f64 {
+        let (x, fs) = (self.x, self.fs);
+        let nfeat = matcher.wear_features.len();
         let df = fs / x.len().min(1 << 17) as f64;
-        let first = chi2;
+        let first = ev.chi2;
         let mut chosen = None;
         for &(cand, _, _) in detection.candidates.iter() {
             if (cand - detection.initial_hz).abs() < 0.5 * df {
                 continue;
             }
             let fc = refine_near(x, fs, cand, 1.5 * df);
-            let om = fc / f_ref;
-            if om < olo - edge
-                || om > ohi + edge
-                || x.len() < needed_for(fc)
-                || 2.0 * top * fc >= fs
+            if self.outside_band(fc / self.f_ref, self.edge())
+                || self.check_length(fc).is_err()
+                || self.rate_too_low_for(fc)
             {
                 continue;
             }
             // Switch only to a candidate the model actually explains: when every candidate
             // fits badly the record is not this gearbox's, and the spectral choice stands.
-            if let Ok(r) = evaluate(fc)
-                && r.3 < chi2
-                && r.3 <= opts.max_chi2_per_feature * nfeat as f64
+            if let Ok(r) = self.evaluate(matcher, opts, fc)
+                && r.chi2 < ev.chi2
+                && r.chi2 <= opts.max_chi2_per_feature * nfeat as f64
             {
-                (meas, y, post, chi2) = r;
+                *ev = r;
                 chosen = Some((cand, fc));
             }
         }
-        if let Some((cand, fc)) = chosen {
-            warnings.push(format!(
-                "tacho-less f1 re-selected by model fit: the strongest candidate {f1:.2} Hz gave \
-                 χ² {first:.1}, the candidate {cand:.2} Hz (refined {fc:.2} Hz) gives {chi2:.1}"
-            ));
-            f1 = fc;
-            omega1 = fc / f_ref;
-            detection.method = "spectrum, re-selected by model fit";
-            detection.initial_hz = cand;
-        }
+        let Some((cand, fc)) = chosen else {
+            return f1;
+        };
+        warnings.push(format!(
+            "tacho-less f1 re-selected by model fit: the strongest candidate {f1:.2} Hz gave \
+             χ² {first:.1}, the candidate {cand:.2} Hz (refined {fc:.2} Hz) gives {:.1}",
+            ev.chi2
+        ));
+        detection.method = "spectrum, re-selected by model fit";
+        detection.initial_hz = cand;
+        fc
     }
+
+    /// Step 6: the condition indicators, every model line but f1 and 2f1 counted as "other".
+    fn condition_indicators(&self, f1: f64, shaft: f64) -> Result<ConditionIndicators> {
+        let other: Vec<f64> = self
+            .lines
+            .iter()
+            .filter(|l| l.name != "f1" && l.name != "2f1")
+            .map(|l| l.ratio * f1)
+            .collect();
+        condition_indicators(self.x, self.fs, f1, shaft, &other)
+    }
+}
+
+/// The fit at the best table point. A poor one flattens the likelihood (Birge-ratio
+/// inflation: every variance scaled by χ²/D so the interval reflects the misfit instead of the
+/// then meaningless nominal spread), recomputes `ev.post` and warns.
+fn fit_and_inflate(
+    matcher: &Matcher,
+    opts: &DiagnoseOptions,
+    ev: &mut Evaluation,
+    omega1: f64,
+    warnings: &mut Vec<String>,
+) -> Fit {
+    let nfeat = matcher.wear_features.len();
     let fit = Fit {
-        chi2,
+        chi2: ev.chi2,
         features: nfeat,
-        chi2_per_feature: chi2 / nfeat.max(1) as f64,
-        inflated: fit_is_poor(chi2 / nfeat.max(1) as f64, opts),
+        chi2_per_feature: ev.chi2 / nfeat.max(1) as f64,
+        inflated: fit_is_poor(ev.chi2 / nfeat.max(1) as f64, opts),
     };
     if fit.inflated {
-        // Birge-ratio inflation: scale every variance by χ²/D so the interval reflects the
-        // misfit instead of the (then meaningless) nominal spread.
         let inflated = DiagnoseOptions {
             temperature: opts.temperature * fit.chi2_per_feature,
             ..opts.clone()
         };
-        post = posterior(matcher, &y, omega1, &inflated);
+        ev.post = posterior(matcher, &ev.y, omega1, &inflated);
         warnings.push(format!(
             "poor fit: χ² per feature {:.1} at the best table point (threshold {}); the record \
              does not look like this model's output (another gearbox, sensor or fault?). The \
@@ -1085,22 +1254,39 @@ pub fn diagnose_with_spectrum(
             fit.chi2_per_feature, opts.max_chi2_per_feature
         ));
     }
-    let c = opts.credible_level.clamp(0.0, 1.0);
-    let wear = WearDegree {
+    fit
+}
+
+/// Step 4, the answer: the posterior median, the credible interval at `level` and the mode.
+fn wear_degree(post: &Posterior, level: f64) -> WearDegree {
+    let c = level.clamp(0.0, 1.0);
+    WearDegree {
         estimate: post.quantile(0.5),
         lower: post.quantile(0.5 * (1.0 - c)),
         upper: post.quantile(0.5 * (1.0 + c)),
         level: c,
         mode: post.mode(),
-    };
-    // Nearest grid entry for the motion state.
-    let i_ea = nearest(&table.grid.ea, wear.estimate);
-    let i_om = nearest(&table.grid.omega1, omega1);
+    }
+}
+
+/// The majority motion state of the table entry `(i_ea, i_om)` and the share of its seeds in
+/// that state.
+fn motion_state_at(table: &SignatureTable, i_ea: usize, i_om: usize) -> (String, f64) {
     let entry = table.entry(i_ea, i_om);
     let motion_state = entry.majority_motion();
     let share = entry.motion.iter().filter(|m| **m == motion_state).count() as f64
         / entry.motion.len().max(1) as f64;
-    // Nearest entries by likelihood among the Ω1 columns next to the measured one.
+    (motion_state, share)
+}
+
+/// The five entries of highest likelihood among the Ω1 columns next to `i_om`.
+fn nearest_entries(
+    table: &SignatureTable,
+    matcher: &Matcher,
+    y: &[f64],
+    i_om: usize,
+    opts: &DiagnoseOptions,
+) -> Vec<NearEntry> {
     let mut near: Vec<NearEntry> = Vec::new();
     let no = table.grid.omega1.len();
     for j in i_om.saturating_sub(1)..(i_om + 2).min(no) {
@@ -1109,34 +1295,54 @@ pub fn diagnose_with_spectrum(
             near.push(NearEntry {
                 ea: table.grid.ea[i],
                 omega1: table.grid.omega1[j],
-                log_likelihood: matcher.entry_log_likelihood(&y, k, opts),
+                log_likelihood: matcher.entry_log_likelihood(y, k, opts),
                 motion_state: table.entries[k].majority_motion(),
             });
         }
     }
     near.sort_by(|a, b| b.log_likelihood.total_cmp(&a.log_likelihood));
     near.truncate(5);
-    // Planetary check.
-    let (m3, v3) = matcher.stats_at(matcher.f3_feature, wear.estimate, omega1);
+    near
+}
+
+/// Step 5: the z-score of the measured `ln(A_f3/A_f1)` against what the table expects at
+/// `(ea, omega1)`.
+fn planetary_check(
+    matcher: &Matcher,
+    y: &[f64],
+    ea: f64,
+    omega1: f64,
+    opts: &DiagnoseOptions,
+) -> PlanetaryCheck {
+    let (m3, v3) = matcher.stats_at(matcher.f3_feature, ea, omega1);
     let s3 = (v3 + opts.feature_sigma.powi(2)).sqrt();
-    let z3 = (y[matcher.f3_feature] - m3) / s3;
-    let planetary = PlanetaryCheck {
+    PlanetaryCheck {
         f3_log_ratio: y[matcher.f3_feature],
         expected: m3,
         sigma: s3,
-        z: z3,
+        z: (y[matcher.f3_feature] - m3) / s3,
         threshold: opts.planetary_z,
-    };
-    // Lines.
+    }
+}
+
+/// Every measured line with its level re f1 and what the table expects at `(ea, omega1)`.
+fn matched_lines(
+    lines: &[LineDef],
+    meas: &LineMeasurement,
+    matcher: &Matcher,
+    ea: f64,
+    omega1: f64,
+    f1: f64,
+) -> Vec<MatchedLine> {
     let i1 = LineMeasurement::index(lines, "f1").unwrap_or(0);
     let a1 = meas.amplitudes[i1];
     let to_db = 20.0 / std::f64::consts::LN_10;
-    let out_lines = lines
+    lines
         .iter()
         .enumerate()
         .map(|(i, l)| {
             let expected = feature_index(lines, &l.name).map(|d| {
-                let (m, v) = matcher.stats_at(d, wear.estimate, omega1);
+                let (m, v) = matcher.stats_at(d, ea, omega1);
                 (m * to_db, v.sqrt() * to_db)
             });
             MatchedLine {
@@ -1157,61 +1363,22 @@ pub fn diagnose_with_spectrum(
                 },
             }
         })
-        .collect();
-    let other: Vec<f64> = lines
-        .iter()
-        .filter(|l| l.name != "f1" && l.name != "2f1")
-        .map(|l| l.ratio * f1)
-        .collect();
-    let shaft = f1 * gb.input_shaft_ratio();
-    let ci = condition_indicators(x, fs, f1, shaft, &other)?;
-    let coarse: Vec<(f64, f64)> = {
-        // Density on a 0.01 grid (per unit ea).
-        let step = post.ea.get(1).map(|e| e - post.ea[0]).unwrap_or(1.0);
-        let per = ((0.01 / step).round() as usize).max(1);
-        post.ea
-            .chunks(per)
-            .zip(post.p.chunks(per))
-            .map(|(e, p)| {
-                let mass: f64 = p.iter().sum();
-                let round = |v: f64| (v * 1e4).round() / 1e4;
-                (round(e[0]), round(mass / (step * p.len() as f64)))
-            })
-            .collect()
-    };
-    let diagnosis = Diagnosis {
-        wear_degree: wear,
-        f1_hz: f1,
-        shaft_hz: shaft,
-        omega1,
-        omega1_posterior: post.omega_mean,
-        f1_detection: detection,
-        motion_state,
-        motion_state_share: share,
-        planetary_clearance_elevated: z3 > opts.planetary_z,
-        planetary,
-        lines: out_lines,
-        condition_indicators: ci,
-        nearest_entries: near,
-        posterior: coarse,
-        fit,
-        baseline_single_ratio: Baseline {
-            method: "paper: ea whose table mean ln(A_f2/A_f1) at the measured Ω1 is closest",
-            ea: matcher.baseline(&y, omega1, opts.ea_step),
-        },
-        record: RecordInfo {
-            samples: x.len(),
-            sample_rate_hz: fs,
-            duration_s: x.len() as f64 / fs,
-            f1_periods: x.len() as f64 * f1 / fs,
-            welch_segments: meas.segments,
-            segment_len: meas.segment_len,
-        },
-        table_model_hash: table.model_hash.clone(),
-        sensor: table.sensor.label().into(),
-        warnings,
-    };
-    Ok((diagnosis, spectrum.into_whole()))
+        .collect()
+}
+
+/// The posterior density over ea on a 0.01 grid (per unit ea), rounded to 4 decimals.
+fn coarse_density(post: &Posterior) -> Vec<(f64, f64)> {
+    let step = post.ea.get(1).map(|e| e - post.ea[0]).unwrap_or(1.0);
+    let per = ((0.01 / step).round() as usize).max(1);
+    post.ea
+        .chunks(per)
+        .zip(post.p.chunks(per))
+        .map(|(e, p)| {
+            let mass: f64 = p.iter().sum();
+            let round = |v: f64| (v * 1e4).round() / 1e4;
+            (round(e[0]), round(mass / (step * p.len() as f64)))
+        })
+        .collect()
 }
 
 fn nearest(axis: &[f64], v: f64) -> usize {

@@ -11,7 +11,11 @@
 //!   of the backlash contact switches, and a fixed-step RK4 reference.
 //! - [`analysis`]: characteristic frequencies, motion-state classification, bifurcation sweeps,
 //!   single-run simulations with spectra.
-//! - [`signal`]: windows and amplitude spectra (one-sided peak amplitude scaling).
+//! - [`signal`]: windows and amplitude spectra (one-sided peak amplitude scaling), and the line
+//!   estimator ([`signal::lines`]) that the signature table, the diagnosis and the closed loop
+//!   share.
+//! - [`signature`]: the model's line set, the gain-invariant features and the precomputed
+//!   signature table.
 //! - [`plot`]: PNG/SVG figures (plotters, embedded font: no system font needed).
 //!
 //! The numeric modules import nothing from a web framework or a database.

@@ -177,8 +177,87 @@ fn bad_arguments_get_clear_errors() {
         "x99",
     ]);
     assert!(!ok && err.contains("x99"), "{err}");
-    let (ok, _, err) = gearwear(&["model", "--config", "/nonexistent/rig.toml"]);
+    let (ok, _, err) = gearwear(&["model", "--gearbox", "/nonexistent/rig.toml"]);
     assert!(!ok && err.contains("/nonexistent/rig.toml"), "{err}");
+}
+
+fn config(name: &str) -> String {
+    format!("{}/configs/gearboxes/{name}", env!("CARGO_MANIFEST_DIR"))
+}
+
+#[test]
+fn gearbox_kinematics_by_hand() {
+    // 32:80 then 24:72 at 30 Hz: intermediate 12 Hz, output 4 Hz, meshes 960 and 288 Hz.
+    let (ok, out, err) = gearwear(&[
+        "gearbox",
+        "kinematics",
+        "--gearbox",
+        &config("two-stage-parallel.toml"),
+        "--input-hz",
+        "30",
+    ]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let close = |a: &serde_json::Value, b: f64| (a.as_f64().unwrap() - b).abs() < 1e-9 * b;
+    assert!(close(&v["shafts"]["intermediate"], 12.0), "{v}");
+    assert!(close(&v["shafts"]["output"], 4.0), "{v}");
+    assert_eq!(v["meshes"][0]["stage"], 1);
+    assert!(close(&v["meshes"][0]["hz"], 960.0), "{v}");
+    assert!(close(&v["meshes"][1]["hz"], 288.0), "{v}");
+}
+
+#[test]
+fn paper_rig_description_exports_the_default_model() {
+    let (ok, default, err) = gearwear(&["model", "--export", "json"]);
+    assert!(ok, "{err}");
+    let (ok, described, err) = gearwear(&[
+        "model",
+        "--export",
+        "json",
+        "--gearbox",
+        &config("wang2019.toml"),
+    ]);
+    assert!(ok, "{err}");
+    assert_eq!(default, described);
+    let v: serde_json::Value = serde_json::from_str(&described).unwrap();
+    assert_eq!(v["A"].as_array().unwrap().len(), 10);
+    assert_eq!(v["dynamics_estimated"], false);
+    // A tooth-count-only description says its dynamics are estimated and what it assumed.
+    let (ok, out, err) = gearwear(&["gearbox", "show", "--gearbox", &config("spur-pair.toml")]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["dynamics_estimated"], true);
+    assert!(v["assumed"].as_array().unwrap().len() >= 5, "{v}");
+}
+
+#[test]
+fn bad_gearbox_descriptions_get_specific_errors() {
+    let dir = tmpdir("gearbox");
+    let bad = dir.join("bad.toml");
+    std::fs::write(
+        &bad,
+        "format = \"gearwear-gearbox\"\nversion = 1\nname = \"p\"\ninput_shaft = \"s\"\n\
+         [[stage]]\nkind = \"planetary\"\nsun = { shaft = \"s\", teeth = 20 }\n\
+         planets = { count = 3, teeth = 30 }\nring = { teeth = 79 }\ncarrier = { shaft = \"c\" }\n\
+         fixed = \"ring\"\n",
+    )
+    .unwrap();
+    let (ok, _, err) = gearwear(&["gearbox", "show", "--gearbox", bad.to_str().unwrap()]);
+    assert!(
+        !ok,
+        "a ring of 79 teeth with sun 20 and planets 30 must be refused"
+    );
+    assert!(err.contains("coaxial") && err.contains("80"), "{err}");
+    let (ok, _, err) = gearwear(&[
+        "simulate",
+        "--omega1",
+        "1",
+        "--ea",
+        "0.5",
+        "--gearbox",
+        bad.to_str().unwrap(),
+    ]);
+    assert!(!ok && err.contains("profile_shifted"), "{err}");
 }
 
 #[test]

@@ -10,6 +10,7 @@ use super::common::{RigArgs, default_table_for, load_gearbox, parse_range, progr
 use crate::analysis::bifurcation::grid;
 use crate::diagnosis::{DiagnoseOptions, diagnose};
 use crate::record::{Column, Format, ReadOptions, read_record};
+use crate::signal::lines::SEGMENT_PERIODS;
 use crate::signature::precompute::{
     PrecomputeSpec, default_grid, paper_grid, partial_path, precompute,
 };
@@ -159,10 +160,10 @@ pub fn precompute_cmd(a: PrecomputeArgs) -> Result<()> {
         periods: a.periods,
         ..Default::default()
     };
-    if (settings.periods as f64) < crate::signature::SEGMENT_PERIODS {
+    if (settings.periods as f64) < SEGMENT_PERIODS {
         bail!(
             "--periods must be at least {} (one estimator segment)",
-            crate::signature::SEGMENT_PERIODS
+            SEGMENT_PERIODS
         );
     }
     let created_by = std::iter::once("gearwear".to_string())

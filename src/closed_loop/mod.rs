@@ -38,8 +38,9 @@ use crate::diagnosis::{DiagnoseOptions, Matcher, diagnose, posterior};
 use crate::error::{Error, Result};
 use crate::gearbox::Gearbox;
 use crate::record::Record;
+use crate::signal::lines::measure_lines;
 use crate::signature::precompute::{SimOptions, random_initial, simulate_sensor};
-use crate::signature::{SignatureTable, SplitMix64, measure_lines};
+use crate::signature::{SignatureTable, SplitMix64, line_ratios};
 use crate::solver::Dopri5Options;
 use effects::{
     Effect, ElementParams, PATH_RESONANCE, PLANETARY_WEAR, Resonance, SHAFT_MODULATION,
@@ -506,7 +507,7 @@ pub fn calibrate(
 
     // Table features of the record (for the re-estimate after a path stage).
     let lines = &table.features.lines;
-    let meas = measure_lines(&record.samples, fs, f1, lines)?;
+    let meas = measure_lines(&record.samples, fs, f1, &line_ratios(lines))?;
     let matcher = Matcher::new(table, &opts.diagnose)?;
     let feats = meas.features(lines);
 

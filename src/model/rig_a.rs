@@ -13,8 +13,6 @@
 //! Wear is the fixed-axis composite-error amplitude `ea` (units of `b_ref`, the paper's
 //! convention): `e1 = ea sin(Ω1 τ)`, `e2 = ea sin(Ω2 τ)`.
 
-use std::path::Path;
-
 use serde::{Deserialize, Serialize};
 
 use super::assembly::Assembly;
@@ -110,15 +108,6 @@ impl ModelAConfig {
         })?;
         cfg.tooth_counts().validate()?;
         Ok(cfg)
-    }
-
-    /// Read a configuration file.
-    pub fn from_file(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
-            path: path.display().to_string(),
-            source,
-        })?;
-        Self::from_toml(&text, &path.display().to_string())
     }
 
     /// Tooth counts for the kinematic frequencies.

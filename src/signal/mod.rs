@@ -1,4 +1,6 @@
-//! Windows, amplitude spectra and simple signal statistics.
+//! Windows, amplitude spectra, simple signal statistics, and the line estimator ([`lines`]:
+//! Hann DTFT amplitudes of lines at multiples of a mesh frequency, shared by the signature
+//! table, the diagnosis and the closed loop).
 //!
 //! # Conventions (read this first)
 //!
@@ -26,6 +28,7 @@
 //!   unusable input; their `try_*` twins return the explanatory error instead.
 
 pub mod features;
+pub mod lines;
 mod phasor;
 mod plan;
 mod spectrum;

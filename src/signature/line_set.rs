@@ -16,7 +16,8 @@
 //! are its planetary stage's lines). For the first paper's rig this gives exactly the 14 lines
 //! of the original hand-written set (tested).
 
-use super::{BAND_HI, LineDef, SEGMENT_PERIODS};
+use super::LineDef;
+use crate::signal::lines::{BAND_HI, SEGMENT_PERIODS};
 
 /// Smallest distance between two kept lines, in units of f1 (4 resolution bins).
 pub const MIN_SPACING: f64 = 4.0 / SEGMENT_PERIODS;
@@ -105,7 +106,7 @@ mod tests {
     fn paper_rig_gets_the_original_fourteen_lines() {
         let gb = Gearbox::paper_rig();
         let new = gearbox_line_set(&gb);
-        let old = super::super::line_set(
+        let old = super::super::legacy_line_set(
             &crate::model::ModelAConfig::default_rig()
                 .tooth_counts()
                 .frequencies(),

@@ -1,16 +1,14 @@
-//! Spectral signatures of the simulated gearbox: the features shared by the offline table
-//! ([`precompute`]) and the diagnosis of a measured record ([`crate::diagnosis`]).
+//! Spectral signatures of the simulated gearbox: the lines and features shared by the offline
+//! table ([`precompute`]) and the diagnosis of a measured record ([`crate::diagnosis`]).
 //!
 //! # The feature definition (read this first)
 //!
-//! A record `x[n]` sampled at `fs` with a known stage-1 mesh frequency `f1` (same time unit) is
-//! cut into segments of `L = round(SEGMENT_PERIODS · fs / f1)` samples (so every segment spans
-//! the same number of mesh periods whatever the speed or sample rate: the frequency resolution
-//! is `f1 / SEGMENT_PERIODS` for every record and every table entry), hopping by `L/2`. Each
-//! segment has its mean removed and is multiplied by a periodic Hann window `w`. For every line
-//! `ℓ` of [`line_set`] at normalised frequency `r_ℓ` (multiple of f1) the segment's Hann DTFT at
-//! exactly `r_ℓ f1` gives a peak amplitude `A_{ℓ,s} = 2 |Σ w[n] x[n] e^{−2πi r_ℓ f1 n / fs}| / Σ w`;
-//! segments are averaged in power, `A_ℓ = sqrt(mean_s A_{ℓ,s}²)` (unit of `x`).
+//! The lines of [`line_set`] (normalised frequencies `r_ℓ`, multiples of the stage-1 mesh
+//! frequency f1) are measured by the line estimator of [`crate::signal::lines`]
+//! ([`measure_lines`](crate::signal::lines::measure_lines): Welch segments of
+//! `SEGMENT_PERIODS` mesh periods, Hann DTFT at exactly `r_ℓ f1`, power average), giving peak
+//! amplitudes `A_ℓ` (unit of the record) and the band power `P_band` of
+//! `[BAND_LO, BAND_HI] · f1`.
 //!
 //! Features used for matching are **invariant to the sensor's overall gain** (a measured record
 //! is housing acceleration in unknown units):
@@ -18,8 +16,7 @@
 //! * `ln(A_ℓ / A_f1)` for every line `ℓ ≠ f1` (natural log of the amplitude ratio to the
 //!   stage-1 mesh line; divide by `ln 10 / 20` for dB). The diagnosis clips these from below at
 //!   a noise floor before comparing ([`crate::diagnosis::DiagnoseOptions::floor_db`]);
-//! * `f1_power_fraction = ln((A_f1² / 2) / P_band)`: the share of the band power `P_band` (of
-//!   `[BAND_LO, BAND_HI] · f1`, Welch segments as above, Parseval on the Hann-windowed FFT) that
+//! * `f1_power_fraction = ln((A_f1² / 2) / P_band)`: the share of the band power `P_band` that
 //!   the f1 line carries. Near 0 for a clean periodic mesh, strongly negative for a broadband
 //!   (chaotic) response.
 //!
@@ -34,18 +31,11 @@ use std::f64::consts::TAU;
 
 use serde::{Deserialize, Serialize};
 
-use crate::error::{Error, Result};
+#[cfg(test)]
 use crate::model::Frequencies;
-use crate::signal::{PlanCache, Window, shared_window};
+use crate::signal::lines::LineMeasurement;
 
 pub use table::{SignatureTable, model_hash};
-
-/// Segment length of the line estimator, in stage-1 mesh periods (resolution `f1 / 64`).
-pub const SEGMENT_PERIODS: f64 = 64.0;
-/// Lower edge of the band whose power normalises `f1_power_fraction`, in units of f1.
-pub const BAND_LO: f64 = 0.05;
-/// Upper edge of that band, in units of f1.
-pub const BAND_HI: f64 = 2.5;
 
 /// What the simulated "sensor" measures.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -83,11 +73,13 @@ pub struct LineDef {
     pub planetary: bool,
 }
 
-/// The lines the model produces that the estimator measures, in ascending frequency: the mesh
-/// frequencies, their harmonics and combination tones, and the subharmonics of period-2 motion.
-/// Lines closer than 4 resolution bins (`4 / SEGMENT_PERIODS` f1) to another are left out (e.g.
-/// `3f2 = 1.08` next to `f1 + f3 = 1.0875`; `f2 + f3 = 0.4475` next to `f1/2`).
-pub fn line_set(fr: &Frequencies) -> Vec<LineDef> {
+/// The original hand-written line set of the first paper's rig (kept as the reference that
+/// [`line_set::gearbox_line_set`] must reproduce for that rig): the mesh frequencies, their
+/// harmonics and combination tones, and the subharmonics of period-2 motion. Lines closer than 4
+/// resolution bins (`4 / SEGMENT_PERIODS` f1) to another are left out (e.g. `3f2 = 1.08` next
+/// to `f1 + f3 = 1.0875`; `f2 + f3 = 0.4475` next to `f1/2`).
+#[cfg(test)]
+pub(crate) fn legacy_line_set(fr: &Frequencies) -> Vec<LineDef> {
     let (f2, f3) = (fr.f2, fr.f3);
     let l = |name: &str, ratio: f64, planetary: bool| LineDef {
         name: name.into(),
@@ -114,24 +106,14 @@ pub fn line_set(fr: &Frequencies) -> Vec<LineDef> {
     v
 }
 
-/// Highest line ratio of a line set (sets the sample-rate requirement `fs > 2 · max · f1`).
-pub fn highest_ratio(lines: &[LineDef]) -> f64 {
-    lines.iter().map(|l| l.ratio).fold(BAND_HI, f64::max)
+/// The ratios of a line set, in its order (what
+/// [`measure_lines`](crate::signal::lines::measure_lines) measures).
+pub fn line_ratios(lines: &[LineDef]) -> Vec<f64> {
+    lines.iter().map(|l| l.ratio).collect()
 }
 
-/// Line amplitudes and band power of a record, as defined in the [module docs](self).
-#[derive(Debug, Clone, Serialize)]
-pub struct LineMeasurement {
-    /// Peak amplitude of each line (unit of the record), in the order of the line set.
-    pub amplitudes: Vec<f64>,
-    /// Power (mean square, unit²) in `[BAND_LO, BAND_HI] · f1`.
-    pub band_power: f64,
-    /// Number of Welch segments averaged.
-    pub segments: usize,
-    /// Segment length in samples.
-    pub segment_len: usize,
-}
-
+/// The signature's side of a [`LineMeasurement`] (which the line estimator of
+/// [`crate::signal::lines`] defines): lines by name, and the features of the [module docs](self).
 impl LineMeasurement {
     /// Index of a line by name in `lines`.
     pub fn index(lines: &[LineDef], name: &str) -> Option<usize> {
@@ -169,159 +151,6 @@ pub fn feature_names(lines: &[LineDef]) -> Vec<String> {
         .collect();
     v.push("f1_power_fraction".into());
     v
-}
-
-/// Samples per segment for a record at `fs` with mesh frequency `f1` (same time unit).
-pub fn segment_len(fs: f64, f1: f64) -> usize {
-    (SEGMENT_PERIODS * fs / f1).round().max(0.0) as usize
-}
-
-/// Measure the lines of `x` (sample rate `fs`, stage-1 mesh frequency `f1`, same time unit).
-///
-/// Errors: a non-finite sample, a record shorter than one segment, `f1` or `fs` not positive,
-/// a line at or above Nyquist.
-pub fn measure_lines(x: &[f64], fs: f64, f1: f64, lines: &[LineDef]) -> Result<LineMeasurement> {
-    if !(fs.is_finite() && fs > 0.0 && f1.is_finite() && f1 > 0.0) {
-        return Err(Error::param(
-            "f1 / sample rate",
-            f1 / fs,
-            "both must be finite and positive",
-        ));
-    }
-    if let Some((index, &value)) = x.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-        return Err(Error::NonFiniteSample { index, value });
-    }
-    let highest = highest_ratio(lines) * f1;
-    if 2.0 * highest >= fs {
-        return Err(Error::SampleRateTooLow {
-            sample_rate: fs,
-            highest_line_hz: highest,
-            needed: 2.0 * highest,
-        });
-    }
-    let l = segment_len(fs, f1);
-    if l < 16 || x.len() < l {
-        return Err(Error::RecordTooShort {
-            samples: x.len(),
-            periods: x.len() as f64 * f1 / fs,
-            f1_hz: f1,
-            needed_periods: SEGMENT_PERIODS as usize,
-            needed_samples: l.max(16),
-        });
-    }
-    let hop = (l / 2).max(1);
-    let nseg = 1 + (x.len() - l) / hop;
-    let w = shared_window(Window::Hann, l);
-    let wsum: f64 = w.iter().sum();
-    let w2sum: f64 = w.iter().map(|v| v * v).sum();
-    // Window × complex exponential, per line, and its sum (for the mean removal). Stored
-    // sample-major (`[n][line]`) so that one pass over a segment updates every line's sums:
-    // the lines' accumulations are independent chains the CPU overlaps (and vectorises), each
-    // still summed in sample order, so the values are those of one line at a time.
-    let nl = lines.len();
-    let mut kre = vec![0.0; l * nl];
-    let mut kim = vec![0.0; l * nl];
-    let mut ksum: Vec<(f64, f64)> = Vec::with_capacity(nl);
-    let (mut pc, mut ps) = (vec![0.0; l], vec![0.0; l]);
-    for (q, ln) in lines.iter().enumerate() {
-        let c = ln.ratio * f1 / fs;
-        crate::signal::unit_phasors(c, &mut pc, &mut ps);
-        let (mut sr, mut si) = (0.0, 0.0);
-        for (n, wv) in w.iter().enumerate() {
-            let (s, co) = (ps[n], pc[n]);
-            let (re, im) = (wv * co, -wv * s);
-            kre[n * nl + q] = re;
-            kim[n * nl + q] = im;
-            sr += re;
-            si += im;
-        }
-        ksum.push((sr, si));
-    }
-    let mut sum_re = vec![0.0; nl];
-    let mut sum_im = vec![0.0; nl];
-    let mut power = vec![0.0; lines.len()];
-    let plan = PlanCache::global().forward(l);
-    let mut input = plan.make_input_vec();
-    let mut spectrum = plan.make_output_vec();
-    let mut scratch = plan.make_scratch_vec();
-    let (k_lo, k_hi) = (
-        (BAND_LO * f1 * l as f64 / fs).ceil() as usize,
-        ((BAND_HI * f1 * l as f64 / fs).floor() as usize).min(l / 2),
-    );
-    let mut band = 0.0;
-    for s in 0..nseg {
-        let seg = &x[s * hop..s * hop + l];
-        let mean = seg.iter().sum::<f64>() / l as f64;
-        line_sums(seg, &kre, &kim, &mut sum_re, &mut sum_im);
-        for (((p, &(sr, si)), &a), &b) in power.iter_mut().zip(&ksum).zip(&sum_re).zip(&sum_im) {
-            let (mut a, mut b) = (a, b);
-            a -= mean * sr;
-            b -= mean * si;
-            let amp = 2.0 * a.hypot(b) / wsum;
-            *p += amp * amp;
-        }
-        for ((o, xv), wv) in input.iter_mut().zip(seg).zip(w.iter()) {
-            *o = (xv - mean) * wv;
-        }
-        plan.process_with_scratch(&mut input, &mut spectrum, &mut scratch)
-            .map_err(|e| Error::Signal(format!("FFT failed: {e}")))?;
-        let e: f64 = spectrum[k_lo..=k_hi.max(k_lo)]
-            .iter()
-            .map(|c| c.norm_sqr())
-            .sum();
-        band += 2.0 * e / (l as f64 * w2sum);
-    }
-    let inv = 1.0 / nseg as f64;
-    Ok(LineMeasurement {
-        amplitudes: power.iter().map(|p| (p * inv).sqrt()).collect(),
-        band_power: band * inv,
-        segments: nseg,
-        segment_len: l,
-    })
-}
-
-/// `sum_re[q] = Σ_n seg[n] kre[n][q]` and likewise `sum_im`, kernels sample-major with
-/// `sum_re.len()` lines; each line summed in sample order.
-#[inline(always)]
-fn line_sums_impl(seg: &[f64], kre: &[f64], kim: &[f64], sum_re: &mut [f64], sum_im: &mut [f64]) {
-    let nl = sum_re.len();
-    sum_re.fill(0.0);
-    sum_im.fill(0.0);
-    for ((xv, kr), ki) in seg
-        .iter()
-        .zip(kre.chunks_exact(nl))
-        .zip(kim.chunks_exact(nl))
-    {
-        for (a, k) in sum_re.iter_mut().zip(kr) {
-            *a += xv * k;
-        }
-        for (b, k) in sum_im.iter_mut().zip(ki) {
-            *b += xv * k;
-        }
-    }
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn line_sums_avx2(
-    seg: &[f64],
-    kre: &[f64],
-    kim: &[f64],
-    sum_re: &mut [f64],
-    sum_im: &mut [f64],
-) {
-    line_sums_impl(seg, kre, kim, sum_re, sum_im)
-}
-
-/// [`line_sums_impl`] with 256-bit vectors when the CPU has AVX2 (same operations per line,
-/// no FMA contraction: identical results).
-fn line_sums(seg: &[f64], kre: &[f64], kim: &[f64], sum_re: &mut [f64], sum_im: &mut [f64]) {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe { line_sums_avx2(seg, kre, kim, sum_re, sum_im) };
-    }
-    line_sums_impl(seg, kre, kim, sum_re, sum_im)
 }
 
 /// SplitMix64: a tiny, well-mixed deterministic generator for seeds and initial states (no
@@ -373,11 +202,12 @@ pub fn mix_seed(parts: &[u64]) -> u64 {
 mod tests {
     use super::*;
     use crate::model::ModelAConfig;
+    use crate::signal::lines::measure_lines;
 
     #[test]
     fn measures_known_lines_gain_invariantly() {
         let fr = ModelAConfig::default_rig().tooth_counts().frequencies();
-        let lines = line_set(&fr);
+        let lines = line_set::gearbox_line_set(&crate::gearbox::Gearbox::paper_rig());
         let (fs, f1) = (25_600.0, 870.0);
         let n = 25_600;
         let sig = |gain: f64| -> Vec<f64> {
@@ -391,7 +221,7 @@ mod tests {
                 })
                 .collect()
         };
-        let m = measure_lines(&sig(1.0), fs, f1, &lines).unwrap();
+        let m = measure_lines(&sig(1.0), fs, f1, &line_ratios(&lines)).unwrap();
         let a = |name: &str| m.amplitudes[LineMeasurement::index(&lines, name).unwrap()];
         assert!((a("f1") - 2.0).abs() < 1e-3, "{}", a("f1"));
         assert!((a("f2") - 0.5).abs() < 1e-3);
@@ -400,26 +230,12 @@ mod tests {
         // Band power: (2² + 0.5² + 0.1²)/2.
         assert!((m.band_power - (4.0 + 0.25 + 0.01) / 2.0).abs() < 0.01 * m.band_power);
         let f = m.features(&lines);
-        let g = measure_lines(&sig(37.0), fs, f1, &lines)
+        let g = measure_lines(&sig(37.0), fs, f1, &line_ratios(&lines))
             .unwrap()
             .features(&lines);
         for (x, y) in f.iter().zip(&g) {
             assert!((x - y).abs() < 1e-9);
         }
         assert_eq!(f.len(), feature_names(&lines).len());
-    }
-
-    #[test]
-    fn refuses_short_records_and_low_rates() {
-        let lines = line_set(&ModelAConfig::default_rig().tooth_counts().frequencies());
-        let x = vec![0.0; 100];
-        assert!(matches!(
-            measure_lines(&x, 25_600.0, 870.0, &lines),
-            Err(Error::RecordTooShort { .. })
-        ));
-        assert!(matches!(
-            measure_lines(&x, 3000.0, 870.0, &lines),
-            Err(Error::SampleRateTooLow { .. })
-        ));
     }
 }

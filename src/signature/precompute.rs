@@ -17,13 +17,14 @@ use rayon::prelude::*;
 
 use super::table::{Entry, FORMAT, FeatureDefs, Grid, SimulationSettings, VERSION};
 use super::{
-    BAND_HI, BAND_LO, LineDef, SEGMENT_PERIODS, SensorQuantity, SignatureTable, SplitMix64,
-    feature_names, measure_lines, mix_seed, model_hash,
+    LineDef, SensorQuantity, SignatureTable, SplitMix64, feature_names, line_ratios, mix_seed,
+    model_hash,
 };
 use crate::analysis::motion::{ClassifyOptions, classify};
 use crate::error::{Error, Result};
 use crate::gearbox::Gearbox;
 use crate::model::{DimensionlessModel, Wear};
+use crate::signal::lines::{BAND_HI, BAND_LO, SEGMENT_PERIODS, measure_lines};
 use crate::solver::{Dopri5, Dopri5Options, Integrator, OdeSystem, advance_to, sample_uniform};
 
 impl Default for SimulationSettings {
@@ -221,7 +222,7 @@ pub fn simulate_seed(
             },
         },
     )?;
-    let m = measure_lines(&rec.series, spp as f64, 1.0, lines)?;
+    let m = measure_lines(&rec.series, spp as f64, 1.0, &line_ratios(lines))?;
     let motion = classify(&rec.poincare, rec.scale, &ClassifyOptions::default())
         .map(|c| c.state.label())
         .unwrap_or_else(|_| "unknown".into());
