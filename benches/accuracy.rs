@@ -127,7 +127,7 @@ fn main() {
                     estimate: d.wear_degree.estimate,
                     lower: d.wear_degree.lower,
                     upper: d.wear_degree.upper,
-                    baseline: d.baseline_single_ratio.ea,
+                    baseline: d.baseline_single_ratio.map_or(f64::NAN, |b| b.ea),
                     f1_error_rel: d.f1_hz / (om * f_ref) - 1.0,
                     planetary_flag: d.planetary_clearance_elevated,
                     motion: d.motion_state,

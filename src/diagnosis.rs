@@ -218,13 +218,18 @@ pub struct Diagnosis {
     /// Share of the table's seeds in that state at the nearest entry.
     pub motion_state_share: f64,
     pub planetary_clearance_elevated: bool,
-    pub planetary: PlanetaryCheck,
+    /// Absent for a gearbox without a planetary stage that the wear leaves out.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub planetary: Option<PlanetaryCheck>,
     pub lines: Vec<MatchedLine>,
     pub condition_indicators: ConditionIndicators,
     pub nearest_entries: Vec<NearEntry>,
     /// Posterior density over ea on a 0.01 grid: `(ea, density)`.
     pub posterior: Vec<(f64, f64)>,
-    pub baseline_single_ratio: Baseline,
+    /// The paper's single-ratio method; absent for a gearbox with no second wear stage (its
+    /// line `f2` is what the method reads).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub baseline_single_ratio: Option<Baseline>,
     pub fit: Fit,
     pub record: RecordInfo,
     /// Table identity.
@@ -238,8 +243,12 @@ pub struct Diagnosis {
 pub struct Matcher {
     /// Feature indices used for ea.
     wear_features: Vec<usize>,
-    f2_feature: usize,
-    f3_feature: usize,
+    /// The first other wear stage's mesh line (`f2` of the paper's rig): the single-ratio
+    /// baseline reads it.
+    f2_feature: Option<usize>,
+    /// The first planetary stage's mesh line when the wear leaves that stage out (`f3` of the
+    /// paper's rig): the planetary check reads it.
+    f3_feature: Option<usize>,
     /// mean and variance per entry per feature (entry-major).
     mean: Vec<Vec<f64>>,
     var: Vec<Vec<f64>>,
@@ -280,9 +289,23 @@ impl Matcher {
             }
         }
         wear_features.push(nf - 1); // f1_power_fraction
-        let missing = |n: &str| Error::InvalidConfig(format!("the table has no `{n}` line"));
-        let f2_feature = feature_index(lines, "f2").ok_or_else(|| missing("f2"))?;
-        let f3_feature = feature_index(lines, "f3").ok_or_else(|| missing("f3"))?;
+        // Mesh lines of other stages are named `f<stage>` (see signature::line_set).
+        let is_mesh_line = |l: &&LineDef| {
+            l.name.len() > 1
+                && l.name.starts_with('f')
+                && l.name[1..].chars().all(|c| c.is_ascii_digit())
+                && l.name != "f1"
+        };
+        let first_mesh = |planetary: bool| {
+            lines
+                .iter()
+                .filter(is_mesh_line)
+                .filter(|l| l.planetary == planetary)
+                .min_by_key(|l| l.name[1..].parse::<usize>().unwrap_or(usize::MAX))
+                .and_then(|l| feature_index(lines, &l.name))
+        };
+        let f2_feature = first_mesh(false);
+        let f3_feature = first_mesh(true);
         let mut mean = Vec::with_capacity(table.entries.len());
         let mut var = Vec::with_capacity(table.entries.len());
         for e in &table.entries {
@@ -463,19 +486,20 @@ impl Matcher {
 
     /// The paper's single-ratio estimate: the ea whose table mean of ln(A_f2/A_f1) at Ω1 is
     /// closest to the measured one.
-    pub fn baseline(&self, y: &[f64], om: f64, step: f64) -> f64 {
+    pub fn baseline(&self, y: &[f64], om: f64, step: f64) -> Option<f64> {
+        let f2 = self.f2_feature?;
         let (lo, hi) = (self.ea[0], self.ea[self.n_ea - 1]);
         let n = ((hi - lo) / step).round() as usize;
         let mut best = (f64::INFINITY, lo);
         for k in 0..=n {
             let ea = lo + k as f64 * step;
-            let (m, _) = self.stats_at(self.f2_feature, ea, om);
-            let d = (y[self.f2_feature] - m).abs();
+            let (m, _) = self.stats_at(f2, ea, om);
+            let d = (y[f2] - m).abs();
             if d < best.0 {
                 best = (d, ea);
             }
         }
-        best.1
+        Some(best.1)
     }
 }
 
@@ -945,17 +969,19 @@ pub fn diagnose_with_spectrum(
         f1_detection: detection,
         motion_state,
         motion_state_share: share,
-        planetary_clearance_elevated: planetary.z > opts.planetary_z,
+        planetary_clearance_elevated: planetary.as_ref().is_some_and(|p| p.z > opts.planetary_z),
         planetary,
         lines: out_lines,
         condition_indicators: ci,
         nearest_entries: near,
         posterior: coarse_density(&ev.post),
         fit,
-        baseline_single_ratio: Baseline {
-            method: "paper: ea whose table mean ln(A_f2/A_f1) at the measured Ω1 is closest",
-            ea: matcher.baseline(&ev.y, omega1, opts.ea_step),
-        },
+        baseline_single_ratio: matcher
+            .baseline(&ev.y, omega1, opts.ea_step)
+            .map(|ea| Baseline {
+                method: "paper: ea whose table mean ln(A_f2/A_f1) at the measured Ω1 is closest",
+                ea,
+            }),
         record: RecordInfo {
             samples: x.len(),
             sample_rate_hz: fs,
@@ -1313,16 +1339,17 @@ fn planetary_check(
     ea: f64,
     omega1: f64,
     opts: &DiagnoseOptions,
-) -> PlanetaryCheck {
-    let (m3, v3) = matcher.stats_at(matcher.f3_feature, ea, omega1);
+) -> Option<PlanetaryCheck> {
+    let f3 = matcher.f3_feature?;
+    let (m3, v3) = matcher.stats_at(f3, ea, omega1);
     let s3 = (v3 + opts.feature_sigma.powi(2)).sqrt();
-    PlanetaryCheck {
-        f3_log_ratio: y[matcher.f3_feature],
+    Some(PlanetaryCheck {
+        f3_log_ratio: y[f3],
         expected: m3,
         sigma: s3,
-        z: (y[matcher.f3_feature] - m3) / s3,
+        z: (y[f3] - m3) / s3,
         threshold: opts.planetary_z,
-    }
+    })
 }
 
 /// Every measured line with its level re f1 and what the table expects at `(ea, omega1)`.

@@ -140,17 +140,29 @@ async fn signed_delivery_with_retries(b: Backend) {
     events.sort();
     assert_eq!(events, ["diagnosis.created", "wear.threshold_crossed"]);
 
-    // The log shows the failed attempts before the success.
-    let (s, _, body) = checked(
-        app.client
-            .get(app.url(&format!("/v1/webhooks/{id}/deliveries")))
-            .bearer_auth(&app.admin_key),
-        "GET",
-        "/v1/webhooks/{webhook_id}/deliveries",
-    )
-    .await;
-    assert_eq!(s, 200);
-    let log = json(&body);
+    // The log shows the failed attempts before the success. The receiver can see the second
+    // success a moment before the worker has written it to the log (it records an attempt once
+    // the answer is in), so wait for the log to catch up, bounded.
+    let mut log = serde_json::Value::Null;
+    for _ in 0..100 {
+        let (s, _, body) = checked(
+            app.client
+                .get(app.url(&format!("/v1/webhooks/{id}/deliveries")))
+                .bearer_auth(&app.admin_key),
+            "GET",
+            "/v1/webhooks/{webhook_id}/deliveries",
+        )
+        .await;
+        assert_eq!(s, 200);
+        log = json(&body);
+        let done = log["deliveries"]
+            .as_array()
+            .is_some_and(|ds| ds.iter().all(|d| d["status"] == "delivered"));
+        if done {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+    }
     let ds = log["deliveries"].as_array().unwrap();
     assert_eq!(ds.len(), 2);
     let attempts: usize = ds
