@@ -1,12 +1,15 @@
 #!/usr/bin/env python3
 """Helpers of scripts/cluster_test.sh (standard library only).
 
-  receiver PORTFILE LOG      webhook receiver on 127.0.0.1 (a free port, written to PORTFILE):
+  receiver PORTFILE LOG [PIDDIR]
+                             webhook receiver on 127.0.0.1 (a free port, written to PORTFILE):
                              one JSON line per request arrival ("recv") and per 2xx answer
                              written ("ok"), with the Gearwear-Delivery id, the event, the
-                             signature header, the body and the sender's port.
+                             signature header, the body, the sender's port and which replica
+                             sent it (PIDDIR/replica-N.pid files, as cluster.sh writes them).
                              GET /_hang?on=1 makes later deliveries wait (at most 25 s) until
-                             GET /_hang?on=0, then they are answered 200.
+                             GET /_hang?on=0 or GET /_release?d=DELIVERY_ID (that one only),
+                             then they are answered 200.
   race URL_A URL_B KEY BODY TRIALS
                              TRIALS times: one new Idempotency-Key, the same record POSTed to
                              both replicas at once (a barrier); prints a JSON summary.
@@ -52,10 +55,44 @@ def post(url, key, body, idem, timeout=30):
         return None, repr(e).encode(), None
 
 
-def receiver(portfile, logpath):
+def owner(peer_port, my_port, piddir):
+    """The replica (number, from PIDDIR/replica-N.pid) whose socket is the other end of this
+    connection: /proc/net/tcp gives the socket's inode, /proc/PID/fd the process holding it."""
+    inode = None
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        try:
+            lines = open(table).readlines()[1:]
+        except OSError:
+            continue
+        for l in lines:
+            f = l.split()
+            if (int(f[1].rsplit(":", 1)[1], 16) == peer_port
+                    and int(f[2].rsplit(":", 1)[1], 16) == my_port):
+                inode = f[9]
+                break
+        if inode:
+            break
+    if not inode or not piddir:
+        return None
+    want = f"socket:[{inode}]"
+    for name in os.listdir(piddir):
+        if not (name.startswith("replica-") and name.endswith(".pid")):
+            continue
+        try:
+            pid = open(os.path.join(piddir, name)).read().strip()
+            for fd in os.listdir(f"/proc/{pid}/fd"):
+                if os.readlink(f"/proc/{pid}/fd/{fd}") == want:
+                    return {"replica": int(name[8:-4]), "pid": int(pid)}
+        except OSError:
+            continue
+    return None
+
+
+def receiver(portfile, logpath, piddir=None):
     lock = threading.Lock()
     release = threading.Event()
     release.set()
+    waiting = {}  # delivery id → Event, for deliveries held in hang mode
     out = open(logpath, "a", buffering=1)
 
     def log(**kw):
@@ -78,11 +115,20 @@ def receiver(portfile, logpath):
 
         def do_GET(self):
             if self.path.startswith("/_hang"):
-                if self.path.endswith("on=1"):
-                    release.clear()
-                else:
-                    release.set()
+                with lock:
+                    if self.path.endswith("on=1"):
+                        release.clear()
+                    else:
+                        release.set()
+                        for ev in waiting.values():
+                            ev.set()
                 self.reply(200)
+            elif self.path.startswith("/_release?d="):
+                with lock:
+                    ev = waiting.get(self.path.split("=", 1)[1])
+                if ev:
+                    ev.set()
+                self.reply(200 if ev else 404)
             else:
                 self.reply(404)
 
@@ -92,9 +138,14 @@ def receiver(portfile, logpath):
             d = self.headers.get("Gearwear-Delivery")
             port = self.client_address[1]
             log(ev="recv", delivery=d, event=self.headers.get("Gearwear-Event"),
-                sig=self.headers.get("Gearwear-Signature"), body=body.decode(), port=port)
-            if not release.is_set():
-                release.wait(25)
+                sig=self.headers.get("Gearwear-Signature"), body=body.decode(), port=port,
+                sender=owner(port, self.server.server_address[1], piddir))
+            with lock:
+                ev = None if release.is_set() else threading.Event()
+                if ev:
+                    waiting[d] = ev
+            if ev:
+                ev.wait(25)
                 # A sender killed meanwhile has closed its end: writing would still succeed
                 # (into the socket buffer), so look for the end of stream first.
                 r, _, _ = select.select([self.connection], [], [], 0)
