@@ -21,7 +21,7 @@
 #
 #   scripts/cluster_test.sh [1 2 3 4 5]          # default: all; 2 and 3 run together
 #
-# Environment: TRIALS [30], RECORDS [300], KILL_RECORDS [600], KILLS [4], SCALE_SECONDS [20],
+# Environment: TRIALS [30], RECORDS [300], KILL_RECORDS [3000], KILLS [4], SCALE_SECONDS [20],
 # SCALE_CONCURRENCY [4], PGBENCH_SECONDS [15]. Prints the figures; exits non-zero when a
 # check fails. Needs python3 and PostgreSQL at 127.0.0.1:5432; cluster.sh installs nginx.
 set -euo pipefail
@@ -276,27 +276,32 @@ fi
 
 # ---------------------------------------------------------------------------------------
 if want 4; then
-  nrec=${KILL_RECORDS:-600} kills=${KILLS:-4}
+  nrec=${KILL_RECORDS:-3000} kills=${KILLS:-4}
   say "== 4. kill -9 under load: $nrec records through nginx, 6 clients, $kills kills"
   start_cluster 2 kill9
   k=$(key ingest,read)
   "${TOOL[@]}" ingest "$CLUSTER_URL" "$k" "$work/model.f32" "$nrec" 6 "$work/kill.acked" >"$work/kill.out" &
   ing_pid=$!
   sleep 3
+  # Odd kills: cluster.sh restarts the replica at once. Even kills: it is held down 8 s,
+  # longer than nginx's fail_timeout (5 s), so nginx tries it again while it is down.
   for n in $(seq "$kills"); do
     kill -0 "$ing_pid" 2>/dev/null || break
     i=$(((n - 1) % 2 + 1))
     p=$(replica_pid "$i")
+    down=0
+    [ $((n % 2)) = 0 ] && { down=8; touch "$CLUSTER_DIR/hold-$i"; }
     kill -9 "$p"
-    t=$(date +%s.%N)
+    t=$(now)
+    if [ "$down" -gt 0 ]; then sleep "$down"; rm -f "$CLUSTER_DIR/hold-$i"; fi
     sleep 0.6 # cluster.sh looks every 0.5 s
     for _ in $(seq 100); do [ "$(replica_pid "$i")" != "$p" ] && break; sleep 0.1; done
     if w=$(wait_ready "${CLUSTER_PORTS[$((i - 1))]}" 30); then
-      say "  kill $n: replica $i (pid $p) at $t; restarted as pid $(replica_pid "$i"), ready $(since "$t") s after the kill"
+      say "  kill $n: replica $i (pid $p) at $t, held down ${down} s; restarted as pid $(replica_pid "$i"), ready $(since "$t") s after the kill"
     else
       check "replica $i restarted" 1 "not ready 30 s after kill $n"
     fi
-    sleep 4
+    sleep 3
   done
   wait "$ing_pid" || true
   out=$(cat "$work/kill.out")
