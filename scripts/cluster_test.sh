@@ -22,7 +22,8 @@
 #   scripts/cluster_test.sh [1 2 3 4 5]          # default: all; 2 and 3 run together
 #
 # Environment: TRIALS [30], RECORDS [300], KILL_RECORDS [3000], KILLS [4], SCALE_SECONDS [20],
-# SCALE_CONCURRENCY [4], PGBENCH_SECONDS [15]. Prints the figures; exits non-zero when a
+# SCALE_CONCURRENCY [4], SCALE_FORMAT [f32; or json], SCALE_SERVE_ARGS [none; e.g.
+# "--raw-retention-days 0"], PGBENCH_SECONDS [15]. Prints the figures; exits non-zero when a
 # check fails. Needs python3 and PostgreSQL at 127.0.0.1:5432; cluster.sh installs nginx.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -345,9 +346,12 @@ fi
 
 # ---------------------------------------------------------------------------------------
 if want 5; then
-  secs=${SCALE_SECONDS:-20} conc=${SCALE_CONCURRENCY:-4}
-  say "== 5. throughput through nginx, 1 and 2 replicas (loadgen, closed loop, $conc clients, ${secs} s, model record f32)"
+  secs=${SCALE_SECONDS:-20} conc=${SCALE_CONCURRENCY:-4} fmt=${SCALE_FORMAT:-f32}
+  say "== 5. throughput through nginx, 1 and 2 replicas (loadgen, closed loop, $conc clients, ${secs} s, model record as $fmt)"
   LG=$TARGET/release/examples/loadgen
+  read -ra extra <<<"${SCALE_SERVE_ARGS:-}"
+  SERVE+=("${extra[@]}")
+  [ ${#extra[@]} -gt 0 ] && say "  serve options added: ${extra[*]}"
   # PostgreSQL's shared writer processes (WAL writer, checkpointer, background writer).
   mapfile -t aux < <(pgrep -f 'postgres: .*(checkpointer|background writer|walwriter)')
   for n in 1 2; do
@@ -366,7 +370,8 @@ if want 5; then
       "${TOOL[@]}" machine_cpu >"$work/c.m0"
     }
     r0=$(q "SELECT count(*) FROM records")
-    "$LG" --url "$CLUSTER_URL" --key "$k" --concurrency "$conc" --seconds "$secs" --format f32 \
+    wal0=$(q "SELECT pg_current_wal_lsn()")
+    "$LG" --url "$CLUSTER_URL" --key "$k" --concurrency "$conc" --seconds "$secs" --format "$fmt" \
       --record "$work/model.wav" --pid "$(replica_pid 1)" 2>&1 | tail -1 >"$work/lg$n.json"
     pgb1="$pgb0 $(backends)"
     # shellcheck disable=SC2086
@@ -376,26 +381,28 @@ if want 5; then
       "${TOOL[@]}" machine_cpu >"$work/c.m1"
     }
     r1=$(q "SELECT count(*) FROM records")
-    python3 - "$work" "$n" "$((r1 - r0))" <<'EOF'
+    wal=$(q "SELECT pg_wal_lsn_diff(pg_current_wal_lsn(), '$wal0')")
+    python3 - "$work" "$n" "$((r1 - r0))" "$wal" <<'EOF'
 import json, sys
-w, n, stored = sys.argv[1], sys.argv[2], int(sys.argv[3])
+w, n, stored, wal = sys.argv[1], sys.argv[2], int(sys.argv[3]), float(sys.argv[4])
 s = json.load(open(f"{w}/lg{n}.json"))
 rec = s["records"]
 def d(name):
     a, b = json.load(open(f"{w}/c.{name}0")), json.load(open(f"{w}/c.{name}1"))
     return sum(v - a.get(p, 0.0) for p, v in b.items())
 m0, m1 = (list(map(float, open(f"{w}/c.m{i}").read().split())) for i in (0, 1))
-busy, total = m1[0] - m0[0], m1[1] - m0[1]
+busy, total, wall = m1[0] - m0[0], m1[1] - m0[1], m1[2] - m0[2]
 parts = {"replicas": d("rep"), "nginx": d("ngx"), "postgres backends": d("pgb"), "postgres writers": d("aux")}
 ms = {k: v / rec * 1e3 for k, v in parts.items()}
 lg = s["client_cpu_ms_per_record"]
 ours = sum(parts.values()) + lg * rec / 1e3
 print(f"  {n} replica(s): {rec} records in {s['seconds']:.1f} s = {s['records_per_second']:.1f} records/s, "
-      f"{s['errors']} errors, p50 {s['p50_ms']:.1f} ms, p99 {s['p99_ms']:.1f} ms; rows stored {stored}")
+      f"{s['errors']} errors, p50 {s['p50_ms']:.1f} ms, p99 {s['p99_ms']:.1f} ms; rows stored {stored}; "
+      f"WAL {wal / max(stored, 1) / 1024:.0f} KiB per record (the whole PostgreSQL cluster's WAL: other databases' writes included)")
 print("    CPU ms per record: " + ", ".join(f"{k} {v:.2f}" for k, v in ms.items()) +
       f", load generator {lg:.2f}; sum {sum(ms.values()) + lg:.2f}")
-print(f"    machine: {busy / total * 100:.0f} % of {total / (s['seconds'] or 1):.1f} cores busy over the run; "
-      f"this test's processes {ours:.1f} s of {busy:.1f} s busy CPU, others {busy - ours:.1f} s")
+print(f"    machine: {busy / total * 100:.0f} % of its {total / wall:.1f} cores busy over the {wall:.1f} s measured; "
+      f"of {busy:.1f} CPU-seconds, this test's processes {ours:.1f}, other processes (other developers' builds) {busy - ours:.1f}")
 EOF
     stop_cluster
   done
@@ -428,20 +435,26 @@ EOF
     pgbench -n -h 127.0.0.1 -U "${PGUSER:-postgres}" -c "$c" -j "$c" -T "$pgsecs" -f "$work/ingest.sql" "$CLUSTER_DB_NAME" \
       >"$work/pgbench$c.out" 2>&1 &
     pb=$!
-    sleep 1
-    bpids=$(q "SELECT pid FROM pg_stat_activity WHERE datname = '$CLUSTER_DB_NAME' AND application_name = 'pgbench'" | tr '\n' ' ')
+    bpids=""
+    for _ in $(seq 30); do
+      sleep 0.1
+      bpids=$(q "SELECT pid FROM pg_stat_activity WHERE datname = '$CLUSTER_DB_NAME' AND application_name = 'pgbench'" | tr '\n' ' ')
+      [ "$(wc -w <<<"$bpids")" = "$c" ] && break
+    done
     # shellcheck disable=SC2086
     b0=$("${TOOL[@]}" cpu $bpids)
     n0=$(q "SELECT count(*) FROM records")
+    wal0=$(q "SELECT pg_current_wal_lsn()")
     sleep $((pgsecs - 3))
     # shellcheck disable=SC2086
     b1=$("${TOOL[@]}" cpu $bpids)
     n1=$(q "SELECT count(*) FROM records")
+    wal=$(q "SELECT pg_wal_lsn_diff(pg_current_wal_lsn(), '$wal0')")
     aux1=$("${TOOL[@]}" cpu "${aux[@]}")
     wait "$pb"
     tps=$(grep -o 'tps = [0-9.]*' "$work/pgbench$c.out" | head -1)
     lat=$(grep -o 'latency average = [0-9.]* ms' "$work/pgbench$c.out" | head -1)
-    python3 - "$b0" "$b1" "$n0" "$n1" "$c" "$tps" "$lat" "$aux0" "$aux1" <<'EOF'
+    python3 - "$b0" "$b1" "$n0" "$n1" "$c" "$tps" "$lat" "$aux0" "$aux1" "$wal" <<'EOF'
 import json, sys
 b0, b1 = json.loads(sys.argv[1]), json.loads(sys.argv[2])
 n = int(sys.argv[4]) - int(sys.argv[3])
@@ -449,7 +462,8 @@ cpu = sum(v - b0.get(p, 0.0) for p, v in b1.items())
 a0, a1 = json.loads(sys.argv[8]), json.loads(sys.argv[9])
 aux = sum(v - a0.get(p, 0.0) for p, v in a1.items())
 print(f"  pgbench {sys.argv[5]} client(s): {sys.argv[6]} records/s ({sys.argv[7]}); backend CPU {cpu / max(n, 1) * 1e3:.2f} ms per record "
-      f"over {n} records in the middle of the run; writer processes {aux:.2f} s over the whole run (shared with other databases)")
+      f"over {n} records in the middle of the run, WAL {float(sys.argv[10]) / max(n, 1) / 1024:.0f} KiB per record; "
+      f"writer processes {aux:.2f} s over the whole run (shared with other databases)")
 EOF
   done
   stop_cluster

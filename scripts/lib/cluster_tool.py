@@ -22,7 +22,8 @@
                              every signature valid; prints a JSON summary.
   cpu PID…                   user+system CPU seconds of each given process (JSON object),
                              from /proc/PID/stat; missing processes are left out.
-  machine_cpu                busy and total CPU seconds of the whole machine (/proc/stat).
+  machine_cpu                busy and total CPU seconds of the whole machine (/proc/stat) and
+                             the time of day.
 """
 import hashlib
 import hmac
@@ -297,7 +298,7 @@ def cpu(pids):
 def machine_cpu():
     f = [int(x) for x in open("/proc/stat").readline().split()[1:]]
     idle = f[3] + f[4]
-    print(f"{(sum(f[:8]) - idle) / TICK:.2f} {sum(f[:8]) / TICK:.2f}")
+    print(f"{(sum(f[:8]) - idle) / TICK:.2f} {sum(f[:8]) / TICK:.2f} {time.time():.3f}")
 
 
 if __name__ == "__main__":
