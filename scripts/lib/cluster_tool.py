@@ -13,8 +13,9 @@
   race URL_A URL_B KEY BODY TRIALS
                              TRIALS times: one new Idempotency-Key, the same record POSTed to
                              both replicas at once (a barrier); prints a JSON summary.
-  ingest URL KEY BODY RECORDS CLIENTS OUT [MACHINES]
-                             RECORDS records for MACHINES machines (default 4, in turn), each
+  ingest URL KEY BODY RECORDS CLIENTS OUT [MACHINES [PREFIX]]
+                             RECORDS records for MACHINES machines PREFIX-0… (default 4,
+                             kill-0…, in turn), each
                              with its own Idempotency-Key, from CLIENTS
                              threads; a request without a 2xx answer (502, connection reset…)
                              is sent again with the same key, at most 40 times, 0.25 s apart.
@@ -209,7 +210,7 @@ def race(url_a, url_b, key, body_path, trials):
     print(json.dumps(res))
 
 
-def ingest(url, key, body_path, records, clients, out_path, machines=4):
+def ingest(url, key, body_path, records, clients, out_path, machines=4, prefix="kill"):
     body = open(body_path, "rb").read()
     run = uuid.uuid4().hex[:8]
     lock = threading.Lock()
@@ -227,7 +228,7 @@ def ingest(url, key, body_path, records, clients, out_path, machines=4):
                 except StopIteration:
                     return
             idem = f"kill-{run}-{n}"
-            path = f"/v1/machines/kill-{n % machines}/records?sample_rate_hz=25600"
+            path = f"/v1/machines/{prefix}-{n % machines}/records?sample_rate_hz=25600"
             for attempt in range(40):
                 st, b, replayed = post(url + path, key, body, idem)
                 with lock:
@@ -309,7 +310,8 @@ if __name__ == "__main__":
     elif cmd == "race":
         race(a[0], a[1], a[2], a[3], int(a[4]))
     elif cmd == "ingest":
-        ingest(a[0], a[1], a[2], int(a[3]), int(a[4]), a[5], int(a[6]) if len(a) > 6 else 4)
+        ingest(a[0], a[1], a[2], int(a[3]), int(a[4]), a[5], int(a[6]) if len(a) > 6 else 4,
+               a[7] if len(a) > 7 else "kill")
     elif cmd == "deliveries":
         deliveries(a[0], a[1])
     elif cmd == "cpu":
