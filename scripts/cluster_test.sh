@@ -92,6 +92,14 @@ stop_cluster() {
   fi
 }
 replica_pid() { cat "$CLUSTER_DIR/replica-$1.pid"; }
+# Errors of this database in the PostgreSQL server log (Debian's place and log_line_prefix
+# "%m [%p] %q%u@%d "); empty when there is no readable log.
+pglog_count() {
+  local f
+  f=$(find /var/log/postgresql -maxdepth 1 -name 'postgresql-*-main.log' 2>/dev/null | head -1)
+  [ -n "$f" ] && [ -r "$f" ] || return 0
+  grep -c "@$CLUSTER_DB_NAME ERROR:  $1" "$f" || true
+}
 q() { psql -X -At -h 127.0.0.1 -U "${PGUSER:-postgres}" -d "$CLUSTER_DB_NAME" -c "$1"; }
 key() { "$GW_BIN" keys create --scope "$1" --database-url "$CLUSTER_DB" 2>/dev/null | grep -o 'gw_[A-Za-z0-9_-]*' | head -1; }
 wait_ready() { # wait_ready PORT SECONDS → prints seconds waited, fails after
@@ -114,15 +122,16 @@ if want 1; then
   say "== 1. the same Idempotency-Key to two replicas at once ($trials trials)"
   start_cluster 2 race
   k=$(key ingest,read)
-  pglog=/var/log/postgresql/postgresql-15-main.log
-  before=$(grep -c "@$CLUSTER_DB_NAME ERROR:  duplicate key value violates unique constraint \"idempotency_keys_pkey\"" "$pglog" 2>/dev/null || true)
+  before=$(pglog_count "duplicate key value violates unique constraint \"idempotency_keys_pkey\"")
   out=$("${TOOL[@]}" race "http://127.0.0.1:${CLUSTER_PORTS[0]}" "http://127.0.0.1:${CLUSTER_PORTS[1]}" \
     "$k" "$work/model.f32" "$trials")
   say "  $out"
   recs=$(q "SELECT count(*) FROM records WHERE machine_id = 'race-1'")
   idem=$(q "SELECT count(*) FROM idempotency_keys WHERE idem_key LIKE 'race-%'")
   diags=$(q "SELECT count(*) FROM diagnoses WHERE machine_id = 'race-1'")
-  conflicts=$(($(grep -c "@$CLUSTER_DB_NAME ERROR:  duplicate key value violates unique constraint \"idempotency_keys_pkey\"" "$pglog" 2>/dev/null || true) - before))
+  after=$(pglog_count "duplicate key value violates unique constraint \"idempotency_keys_pkey\"")
+  conflicts=unknown
+  [ -n "$before" ] && [ -n "$after" ] && conflicts=$((after - before))
   read -r both same one distinct < <(python3 -c 'import json,sys; d=json.loads(sys.argv[1]); print(d["both_2xx"], d["same_body"], d["one_replayed"], d["distinct_record_ids"])' "$out")
   check "both answered 201" "$([ "$both" = "$trials" ] && echo 0 || echo 1)" "$both / $trials"
   check "identical answers" "$([ "$same" = "$trials" ] && echo 0 || echo 1)" "$same / $trials (one of the two marked Idempotent-Replayed in $one)"
@@ -323,7 +332,7 @@ if want 4; then
   # 500 is a server bug (it was: a deadlock between two replicas' group commits, now 503).
   other=$(python3 -c 'import json,sys; d=json.loads(sys.argv[1])["statuses"]; print(sum(v for k, v in d.items() if k not in ("201", "502", "503")))' "$out")
   check "no answer other than 201, 502, 503" "$([ "$other" = 0 ] && echo 0 || echo 1)" "$other other answers"
-  dl=$(grep -c "@$CLUSTER_DB_NAME ERROR:  deadlock detected" /var/log/postgresql/postgresql-15-main.log 2>/dev/null || true)
+  dl=$(pglog_count "deadlock detected")
   say "  deadlocks between replicas in the PostgreSQL log for this database: ${dl:-unknown}"
   # What nginx did: final status of each POST, and the POSTs it passed to a second replica.
   python3 - "$CLUSTER_DIR/nginx/access.log" <<'EOF'
