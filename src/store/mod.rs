@@ -50,7 +50,10 @@ impl StoreError {
     /// * SQLite: `SQLITE_BUSY` / `SQLITE_LOCKED` with any extended code (sqlx reports the
     ///   extended one, e.g. 517 `SQLITE_BUSY_SNAPSHOT`, so the primary code is `code & 0xff`);
     /// * PostgreSQL: class 08 (connection exception), 57P01 `admin_shutdown`, 57P02
-    ///   `crash_shutdown`, 57P03 `cannot_connect_now`, 53300 `too_many_connections`.
+    ///   `crash_shutdown`, 57P03 `cannot_connect_now`, 53300 `too_many_connections`, and a
+    ///   transaction that lost to a concurrent one: 40P01 `deadlock_detected`, 40001
+    ///   `serialization_failure` (two replicas' group commits touching the same machines in
+    ///   opposite orders).
     pub fn is_unavailable(&self) -> bool {
         match self {
             StoreError::Shared(e) => e.is_unavailable(),
@@ -67,8 +70,13 @@ impl StoreError {
                 if e.try_downcast_ref::<sqlx::sqlite::SqliteError>().is_some() {
                     code.parse::<i32>().is_ok_and(|c| matches!(c & 0xff, 5 | 6))
                 } else {
+                    // 40P01, 40001: rolled back after losing to a concurrent transaction;
+                    // like SQLite's BUSY/LOCKED, a retry succeeds.
                     code.starts_with("08")
-                        || matches!(&*code, "57P01" | "57P02" | "57P03" | "53300")
+                        || matches!(
+                            &*code,
+                            "57P01" | "57P02" | "57P03" | "53300" | "40P01" | "40001"
+                        )
                 }
             }
             _ => false,
