@@ -6,12 +6,11 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::Args;
 
-use super::common::{default_table_for, load_gearbox};
+use super::common::load_table;
 use crate::closed_loop::{CalibrateOptions, CalibrationReport, calibrate};
 use crate::diagnosis::DiagnoseOptions;
 use crate::plot::{Panel, Series, panels};
 use crate::record::{Column, ReadOptions, read_record};
-use crate::signature::SignatureTable;
 
 #[derive(Debug, Args)]
 pub struct CalibrateArgs {
@@ -45,17 +44,7 @@ pub struct CalibrateArgs {
 
 /// `gearwear calibrate`.
 pub fn calibrate_cmd(a: CalibrateArgs) -> Result<()> {
-    let gb = match (&a.gearbox, &a.table) {
-        (None, Some(_)) => None,
-        (g, _) => Some(load_gearbox(g.as_deref())?),
-    };
-    let table_path = match (&a.table, &gb) {
-        (Some(t), _) => t.clone(),
-        (None, Some(gb)) => default_table_for(gb),
-        (None, None) => unreachable!("a gearbox is loaded when no table is given"),
-    };
-    let table = SignatureTable::load(&table_path).context("loading the signature table")?;
-    table.check_model(gb.as_ref().unwrap_or(table.gearbox()))?;
+    let table = load_table(a.gearbox.as_deref(), a.table.as_deref(), false)?;
     let record = read_record(
         &a.input,
         &ReadOptions {

@@ -12,6 +12,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use crate::analysis::simulate::{RunSpec, Transient};
 use crate::gearbox::Gearbox;
 use crate::model::Wear;
+use crate::signature::SignatureTable;
 use crate::solver::Dopri5Options;
 
 /// Options shared by the simulation commands.
@@ -50,6 +51,47 @@ pub(crate) fn default_table_for(gb: &Gearbox) -> PathBuf {
     } else {
         PathBuf::from(format!("signatures/{}.json", gb.name()))
     }
+}
+
+/// The signature table for `--gearbox` / `--table`: the given table, else the gearbox's
+/// default one (the paper rig's when neither is given). It must have been computed for the given
+/// gearbox (or, with only `--table`, for the description it carries); `allow_stale` turns a
+/// mismatch into a warning.
+pub(crate) fn load_table(
+    gearbox: Option<&Path>,
+    table: Option<&Path>,
+    allow_stale: bool,
+) -> Result<SignatureTable> {
+    let gb = match (gearbox, table) {
+        (None, Some(_)) => None,
+        (g, _) => Some(load_gearbox(g)?),
+    };
+    let path = match (table, &gb) {
+        (Some(t), _) => t.to_path_buf(),
+        (None, Some(gb)) => default_table_for(gb),
+        (None, None) => crate::signature::table::default_table_path(),
+    };
+    let t = SignatureTable::load(&path).with_context(|| {
+        format!(
+            "loading the signature table (make it with `gearwear precompute{} --output {}`)",
+            gearbox
+                .map(|g| format!(" --gearbox {}", g.display()))
+                .unwrap_or_default(),
+            path.display()
+        )
+    })?;
+    let check = match &gb {
+        Some(gb) => t.check_model(gb),
+        None => t.check_model(t.gearbox()),
+    };
+    if let Err(e) = check {
+        if allow_stale {
+            eprintln!("warning: {e}");
+        } else {
+            return Err(e.into());
+        }
+    }
+    Ok(t)
 }
 
 /// The planetary error a run uses: the option's, else the gearbox's baseline (0 without a

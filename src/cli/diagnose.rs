@@ -6,16 +6,16 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 
-use super::common::{RigArgs, default_table_for, load_gearbox, parse_range, progress_bar};
+use super::common::{RigArgs, default_table_for, load_table, parse_range, progress_bar};
 use crate::analysis::bifurcation::grid;
 use crate::diagnosis::{DiagnoseOptions, diagnose};
 use crate::record::{Column, Format, ReadOptions, read_record};
 use crate::signal::lines::SEGMENT_PERIODS;
+use crate::signature::SensorQuantity;
 use crate::signature::precompute::{
     PrecomputeSpec, default_grid, paper_grid, partial_path, precompute,
 };
-use crate::signature::table::{SimulationSettings, default_table_path};
-use crate::signature::{SensorQuantity, SignatureTable};
+use crate::signature::table::SimulationSettings;
 
 /// Sensor quantity on the command line.
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -212,36 +212,7 @@ pub fn precompute_cmd(a: PrecomputeArgs) -> Result<()> {
 
 /// `gearwear diagnose`.
 pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
-    let gb = match (&a.gearbox, &a.table) {
-        (None, Some(_)) => None,
-        (g, _) => Some(load_gearbox(g.as_deref())?),
-    };
-    let table_path = match (&a.table, &gb) {
-        (Some(t), _) => t.clone(),
-        (None, Some(gb)) => default_table_for(gb),
-        (None, None) => default_table_path(),
-    };
-    let table = SignatureTable::load(&table_path).with_context(|| {
-        format!(
-            "loading the signature table (make it with `gearwear precompute{} --output {}`)",
-            a.gearbox
-                .as_ref()
-                .map(|g| format!(" --gearbox {}", g.display()))
-                .unwrap_or_default(),
-            table_path.display()
-        )
-    })?;
-    let check = match &gb {
-        Some(gb) => table.check_model(gb),
-        None => table.check_model(table.gearbox()),
-    };
-    if let Err(e) = check {
-        if a.allow_stale {
-            eprintln!("warning: {e}");
-        } else {
-            return Err(e.into());
-        }
-    }
+    let table = load_table(a.gearbox.as_deref(), a.table.as_deref(), a.allow_stale)?;
     let opts = ReadOptions {
         format: a.format.map(|f| match f {
             FormatArg::Csv => Format::Csv,
