@@ -38,8 +38,8 @@ use std::f64::consts::{PI, TAU};
 use serde::Serialize;
 
 use super::description::{GearSpec, GearboxDescription, MeshSpec};
-use super::error::GearboxError;
 use super::kinematics::{Fixed, Stage, Topology};
+use crate::error::GearboxError;
 use crate::model::assembly::Assembly;
 use crate::model::element::{Damping, Dof, Element, Load, LoadSchedule, StiffnessShape};
 
@@ -244,6 +244,14 @@ fn gear_values(
     let base_radius_mm = match base_radius_mm {
         Some(rb) => rb,
         None => {
+            if pressure_angle_deg.is_none() {
+                cx.assume(
+                    format!("{label} pressure angle"),
+                    PRESSURE_ANGLE_DEG,
+                    "°",
+                    "standard pressure angle (base radius = m z cos α / 2)",
+                );
+            }
             if module_mm.is_none() && mate.module_mm.is_some() {
                 cx.assume(
                     format!("{label} module"),
@@ -367,8 +375,15 @@ pub fn physics(
     };
     positive("density_kg_m3".into(), d.density_kg_m3)?;
     positive("nominal_input_hz".into(), d.nominal_input_hz)?;
-    let length_ref_um = positive("reference_length_um".into(), d.reference_length_um)?
-        .unwrap_or(REFERENCE_LENGTH_UM);
+    let length_ref_um = match positive("reference_length_um".into(), d.reference_length_um)? {
+        Some(l) => l,
+        None => cx.assume(
+            "reference length (unit of the wear degree ea)".into(),
+            REFERENCE_LENGTH_UM,
+            "µm",
+            "the first paper's b = 5 µm",
+        ),
+    };
     let b_ref = length_ref_um * 1e-6;
     let pinned = positive("reference_frequency_hz".into(), d.reference_frequency_hz)?;
     if d.static_load.is_some() && d.input_torque_nm.is_some() {

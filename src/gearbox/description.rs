@@ -9,7 +9,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use super::error::GearboxError;
+use crate::error::GearboxError;
 
 /// The format tag every description carries.
 pub const FORMAT: &str = "gearwear-gearbox";

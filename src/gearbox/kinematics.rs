@@ -18,7 +18,7 @@ use std::collections::BTreeMap;
 use serde::Serialize;
 
 use super::description::{GearSpec, GearboxDescription, MAX_STAGES, StageSpec};
-use super::error::GearboxError;
+use crate::error::GearboxError;
 
 /// Most planets a planetary stage may have (each adds a coordinate and two meshes).
 pub const MAX_PLANETS: u32 = 32;

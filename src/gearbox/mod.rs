@@ -12,7 +12,6 @@
 
 pub mod build;
 pub mod description;
-pub mod error;
 pub mod kinematics;
 
 use std::path::Path;
@@ -20,9 +19,9 @@ use std::path::Path;
 use serde::Serialize;
 use sha2::{Digest, Sha256};
 
+pub use crate::error::GearboxError;
 pub use build::{AssumedValue, MeshValues, Physics};
 pub use description::{GearboxDescription, TextFormat};
-pub use error::GearboxError;
 pub use kinematics::{Fixed, Kinematics, Stage, Topology};
 
 use crate::model::{Assembly, Wear};

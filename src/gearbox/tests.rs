@@ -454,3 +454,70 @@ fn committed_descriptions_resolve() {
         "the paper rig and three more descriptions are committed"
     );
 }
+
+#[test]
+fn the_sensor_stage_picks_the_simulated_element() {
+    let two = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("configs/gearboxes/two-stage-parallel.toml"),
+    )
+    .unwrap();
+    let m = parse(&two)
+        .unwrap()
+        .assembly(Wear::fixed_axis(0.5))
+        .unwrap()
+        .resolve()
+        .unwrap();
+    assert_eq!(m.sensor, 0);
+    let at2 = two.replace(
+        "input_shaft = \"input\"",
+        "input_shaft = \"input\"\nsensor = { stage = 2 }",
+    );
+    let gb = parse(&at2).unwrap();
+    let m = gb
+        .assembly(Wear::fixed_axis(0.5))
+        .unwrap()
+        .resolve()
+        .unwrap();
+    assert_eq!(m.names[m.sensor], "x2");
+    // The simulated record then follows mesh 2: its mean is that mesh's static deflection,
+    // just past its own half-clearance (stage 2: module 2 mm → 100 µm = 20 b_ref; stage 1:
+    // module 1.5 mm → 15 b_ref).
+    use crate::signature::precompute::{SimOptions, simulate_sensor};
+    let omega1 = 0.3;
+    let spp = 32usize;
+    let period = std::f64::consts::TAU / omega1;
+    let mean = |m: &crate::model::DimensionlessModel| {
+        let rec = simulate_sensor(
+            m,
+            &vec![0.0; 2 * m.n()],
+            &SimOptions {
+                omega1,
+                transient_tau: 600.0,
+                dt_tau: period / spp as f64,
+                samples: 32 * spp,
+                sensor: crate::signature::SensorQuantity::X1,
+                poincare_every: 0,
+                solver: Default::default(),
+            },
+        )
+        .unwrap();
+        rec.series.iter().sum::<f64>() / rec.series.len() as f64
+    };
+    let (b1, b2) = (m.backlash[0], m.backlash[1]);
+    assert!(
+        (b1 - 15.0).abs() < 1e-9 && (b2 - 20.0).abs() < 1e-9,
+        "{b1} {b2}"
+    );
+    let mut at1 = m.clone();
+    at1.sensor = 0;
+    let (x1, x2) = (mean(&at1), mean(&m));
+    assert!(
+        (x1 - b1).abs() < 2.0,
+        "sensor at stage 1: mean {x1}, clearance {b1}"
+    );
+    assert!(
+        (x2 - b2).abs() < 2.0,
+        "sensor at stage 2: mean {x2}, clearance {b2}"
+    );
+}

@@ -15,7 +15,7 @@ use serde_json::Value;
 
 use super::AppState;
 use super::auth::Caller;
-use super::diagnoser::{Input, MachineCalibration};
+use super::diagnoser::Input;
 use super::error::{ApiError, ApiResult};
 use super::records::{
     Decoded, body_format, check_machine_id, decode, parse_query, problem_from_error, read_body,
@@ -23,15 +23,6 @@ use super::records::{
 use super::time::rfc3339;
 use crate::keys::Scope;
 use crate::store::{CalibrationRow, new_id, now_ms};
-
-/// A stored calibration as the diagnoser holds it.
-pub fn held(c: &CalibrationRow) -> MachineCalibration {
-    MachineCalibration {
-        id: c.id.clone(),
-        calibrated_at: rfc3339(c.created_at),
-        effects: serde_json::from_str(&c.effects).unwrap_or(Value::Array(vec![])),
-    }
-}
 
 /// The answer body: the report plus the ids the service gave it.
 fn body(c: &CalibrationRow) -> Value {

@@ -25,6 +25,17 @@ pub struct MachineCalibration {
     pub effects: Value,
 }
 
+impl MachineCalibration {
+    /// A stored calibration as the diagnoser holds it.
+    pub fn from_row(c: &crate::store::CalibrationRow) -> Self {
+        MachineCalibration {
+            id: c.id.clone(),
+            calibrated_at: super::time::rfc3339(c.created_at),
+            effects: serde_json::from_str(&c.effects).unwrap_or(Value::Array(vec![])),
+        }
+    }
+}
+
 /// What the service stores and answers for one diagnosis.
 #[derive(Debug, Clone)]
 pub struct Output {

@@ -13,7 +13,7 @@ use sha2::{Digest, Sha256};
 
 use super::AppState;
 use super::auth::Caller;
-use super::diagnoser::Input;
+use super::diagnoser::{Input, MachineCalibration};
 use super::error::{ApiError, ApiResult};
 use super::spectrum::{plot_from_spectrum, plot_spectrum};
 use crate::keys::Scope;
@@ -696,7 +696,7 @@ async fn ingest(
         .store
         .get_calibration(machine_id)
         .await?
-        .map(|c| super::calibration::held(&c));
+        .map(|c| MachineCalibration::from_row(&c));
     let input = Input {
         samples,
         sample_rate_hz: fs,
