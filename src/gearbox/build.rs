@@ -459,7 +459,8 @@ pub fn physics(
         .iter()
         .filter(|s| matches!(s, Stage::Planetary { .. }))
         .count();
-    let mut input_member: Option<(usize, f64, f64)> = None; // (stage, r, torque paths)
+    // The member driving the first stage: (radius × load paths (m), its rate at input 1 Hz).
+    let mut input_member: Option<(f64, f64)> = None;
     for (k0, (st, spec)) in topo.stages.iter().zip(&d.stages).enumerate() {
         let k = k0 + 1;
         let wears = wear_stages.contains(&k);
@@ -519,7 +520,7 @@ pub fn physics(
                     (gd, pd, g, p, gear_shaft)
                 };
                 if input_member.is_none() {
-                    input_member = Some((k, ga.base_radius_m, 1.0 * rates[shaft_a].abs()));
+                    input_member = Some((ga.base_radius_m, rates[shaft_a].abs()));
                 }
                 drafts.push(MeshDraft {
                     values: MeshValues {
@@ -620,6 +621,8 @@ pub fn physics(
                     rs_spec.module_mm,
                     rs_spec.pressure_angle_deg,
                     rs_spec.face_width_mm,
+                    // A fixed ring is no coordinate: its inertia is never used, so a
+                    // placeholder keeps it off the list of assumed values.
                     rs_spec.inertia.or(if *fixed == Fixed::Ring {
                         Some(1.0)
                     } else {
@@ -697,7 +700,7 @@ pub fn physics(
                         (2.0 * rc, carrier_shaft)
                     };
                     let n = shaft.as_ref().map_or(0.0, |s| rates[s].abs());
-                    input_member = Some((k, r * np as f64, n));
+                    input_member = Some((r * np as f64, n));
                 }
                 let name = |m: &str, n: usize| {
                     if planetary_stages > 1 {
@@ -773,7 +776,7 @@ pub fn physics(
 
     // Module of each mesh for the clearance default: from its first gear's width over 10 is
     // not known here, so keep the module alongside: recompute from the terms' gears instead.
-    let modules = mesh_modules(d, topo);
+    let modules = mesh_modules(d);
     // Mesh values other than stiffness.
     for dr in drafts.iter_mut() {
         let s = &dr.spec;
@@ -965,8 +968,7 @@ pub fn physics(
     }
 
     // Static load.
-    let (stage_in, r_in, n_member) = input_member.expect("a gearbox has a stage");
-    let _ = stage_in;
+    let (r_in, n_member) = input_member.expect("a gearbox has a stage");
     let input_torque_nm = match input_torque {
         Some(t) => t,
         None => {
@@ -1011,7 +1013,7 @@ pub fn physics(
 }
 
 /// Module (m) per stage for the clearance default: the first gear's given or derived module.
-fn mesh_modules(d: &GearboxDescription, _topo: &Topology) -> Vec<f64> {
+fn mesh_modules(d: &GearboxDescription) -> Vec<f64> {
     d.stages
         .iter()
         .map(|s| {
