@@ -68,7 +68,7 @@ pub fn run(a: GearboxArgs) -> Result<()> {
                 "hash": gb.hash,
                 "valid": true,
                 "warnings": gb.warnings,
-                "dynamics_estimated": gb.dynamics_estimated,
+                "dynamics_estimated": gb.dynamics_estimated(),
                 "reference_frequency_hz": f_ref,
                 "input_hz_at_omega1_1": f_ref / gb.f1_hz(1.0),
                 "mesh_ratios": gb.mesh_ratios,

@@ -129,11 +129,16 @@ pub struct Physics {
     pub reference_frequency_hz: f64,
     /// Element index of the simulated sensor.
     pub sensor_element: usize,
+    /// True when no reference frequency pins Ω1 and an inertia, a module or a mesh stiffness
+    /// was assumed: the model's resonances, and so Ω1, are estimates.
+    pub dynamics_estimated: bool,
 }
 
 struct Ctx<'a> {
     d: &'a GearboxDescription,
     assumed: Vec<AssumedValue>,
+    /// Set when a value the dynamics rest on was assumed.
+    dynamic: bool,
 }
 
 impl Ctx<'_> {
@@ -145,6 +150,18 @@ impl Ctx<'_> {
             basis,
         });
         value
+    }
+
+    /// [`Ctx::assume`] for a value the dynamics rest on (an inertia, a module, a stiffness).
+    fn assume_dynamic(
+        &mut self,
+        what: String,
+        value: f64,
+        unit: &'static str,
+        basis: &'static str,
+    ) -> f64 {
+        self.dynamic = true;
+        self.assume(what, value, unit, basis)
     }
 
     fn density(&self) -> f64 {
@@ -233,7 +250,7 @@ fn gear_values(
         (None, Some(rb)) => 2.0 * rb / (z * cos_a),
         (None, None) => match mate.module_mm {
             Some(m) => m,
-            None => cx.assume(
+            None => cx.assume_dynamic(
                 format!("{label} module"),
                 DEFAULT_MODULE_MM,
                 "mm",
@@ -253,7 +270,7 @@ fn gear_values(
                 );
             }
             if module_mm.is_none() && mate.module_mm.is_some() {
-                cx.assume(
+                cx.assume_dynamic(
                     format!("{label} module"),
                     module,
                     "mm",
@@ -281,14 +298,14 @@ fn gear_values(
         Some(j) => j,
         None if ring => {
             let ro = r + 3.0 * module * 1e-3;
-            cx.assume(
+            cx.assume_dynamic(
                 format!("{label} inertia"),
                 0.5 * rho * PI * (ro.powi(4) - r.powi(4)) * b,
                 "kg·m²",
                 "steel annulus from the pitch radius to 3 modules beyond, face width thick",
             )
         }
-        None => cx.assume(
+        None => cx.assume_dynamic(
             format!("{label} inertia"),
             0.5 * rho * PI * r.powi(4) * b,
             "kg·m²",
@@ -372,6 +389,7 @@ pub fn physics(
     let mut cx = Ctx {
         d,
         assumed: Vec::new(),
+        dynamic: false,
     };
     positive("density_kg_m3".into(), d.density_kg_m3)?;
     positive("nominal_input_hz".into(), d.nominal_input_hz)?;
@@ -606,7 +624,7 @@ pub fn physics(
                     false,
                 )?;
                 if pl.mass_kg.is_none() {
-                    cx.assume(
+                    cx.assume_dynamic(
                         format!("stage {k} planet mass"),
                         planet.mass_kg,
                         "kg",
@@ -671,7 +689,7 @@ pub fn physics(
                                 let r = (sun.module_m * *sun_teeth as f64
                                     + planet.module_m * *planet_teeth as f64)
                                     / 2.0;
-                                cx.assume(
+                                cx.assume_dynamic(
                                     format!("stage {k} carrier inertia"),
                                     0.5 * cx.density() * PI * r.powi(4) * planet.face_width_m,
                                     "kg·m²",
@@ -903,7 +921,7 @@ pub fn physics(
         }
         None => match ref_abs {
             Some(k) => k,
-            None => cx.assume(
+            None => cx.assume_dynamic(
                 format!("{} stiffness", drafts[0].label),
                 ref_est,
                 "N/m",
@@ -928,7 +946,7 @@ pub fn physics(
                     };
                     let key = (drafts[i].values.stage, drafts[i].label.clone());
                     if logged.insert(key) {
-                        cx.assume(
+                        cx.assume_dynamic(
                             format!("{} stiffness", drafts[i].label),
                             k,
                             "N/m",
@@ -1007,6 +1025,7 @@ pub fn physics(
             output_dof,
             reference_frequency_hz,
             sensor_element,
+            dynamics_estimated: pinned.is_none() && cx.dynamic,
         },
         cx.assumed,
     ))

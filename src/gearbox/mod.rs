@@ -42,11 +42,11 @@ pub struct Gearbox {
     pub physics: Physics,
     /// Every value the description did not give, with the rule that gave it.
     pub assumed: Vec<AssumedValue>,
-    /// True when the dynamics rest on estimates (no stiffness, inertia or reference frequency
-    /// was given for the reference mesh).
-    pub dynamics_estimated: bool,
     /// Non-fatal remarks (e.g. planets that cannot be equally spaced).
     pub warnings: Vec<String>,
+    /// The reference mesh frequency at an input rate of 1 Hz (the pinion's teeth when it sits
+    /// on the input shaft): kept so that the per-record conversions need no kinematics.
+    pub f1_per_input_hz: f64,
 }
 
 impl Gearbox {
@@ -70,12 +70,7 @@ impl Gearbox {
             .iter()
             .map(|b| format!("{b:02x}"))
             .collect();
-        let dynamics_estimated = description.reference_frequency_hz.is_none()
-            && assumed.iter().any(|a| {
-                a.what.contains("stiffness") && !a.what.contains("fluctuation")
-                    || a.what.contains("inertia")
-                    || a.what.contains("module")
-            });
+        let f1_per_input_hz = topology.kinematics(1.0).meshes[0].hz;
         let gb = Gearbox {
             warnings: topology.warnings.clone(),
             description,
@@ -84,7 +79,7 @@ impl Gearbox {
             mesh_ratios,
             physics,
             assumed,
-            dynamics_estimated,
+            f1_per_input_hz,
         };
         // The model must assemble and resolve (one rigid-body mode for the balancing load).
         gb.assembly(Wear::fixed_axis(0.5))
@@ -119,6 +114,11 @@ impl Gearbox {
             .expect("the committed paper rig description resolves")
     }
 
+    /// True when the dynamics rest on estimates ([`Physics::dynamics_estimated`]).
+    pub fn dynamics_estimated(&self) -> bool {
+        self.physics.dynamics_estimated
+    }
+
     /// The name of the gearbox.
     pub fn name(&self) -> &str {
         &self.description.name
@@ -131,19 +131,18 @@ impl Gearbox {
 
     /// The reference (stage-1) mesh frequency (Hz) at an input-shaft rate (Hz).
     pub fn f1_hz(&self, input_hz: f64) -> f64 {
-        self.kinematics(input_hz).meshes[0].hz
+        self.f1_per_input_hz * input_hz
     }
 
     /// Input-shaft rates over the reference mesh frequency, per shaft (signed: +1 with the
     /// input). With these, a shaft's rate is `ratio × f1`.
     pub fn shaft_ratios(&self) -> std::collections::BTreeMap<String, f64> {
-        let unit = self.kinematics(1.0).meshes[0].hz;
-        self.topology.signed_rates(1.0 / unit)
+        self.topology.signed_rates(1.0 / self.f1_per_input_hz)
     }
 
     /// Input-shaft rate over the reference mesh frequency (`1 / z` for a pinion on the input).
     pub fn input_shaft_ratio(&self) -> f64 {
-        1.0 / self.kinematics(1.0).meshes[0].hz
+        1.0 / self.f1_per_input_hz
     }
 
     /// `ω_h / 2π` (Hz): the reference mesh frequency at Ω1 = 1.

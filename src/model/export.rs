@@ -102,7 +102,7 @@ impl ModelExport {
             config: gb.description.clone(),
             gearbox_hash: gb.hash.clone(),
             assumed: gb.assumed.clone(),
-            dynamics_estimated: gb.dynamics_estimated,
+            dynamics_estimated: gb.dynamics_estimated(),
         }
     }
 }
