@@ -36,23 +36,35 @@ pub fn check_problem(e: &ApiError, what: &str) {
     );
 }
 
+fn check_channel(samples: &[f64], limits: &Limits, what: &str) {
+    assert!(!samples.is_empty(), "{what}: empty record accepted");
+    assert!(
+        samples.len() <= limits.max_samples,
+        "{what}: {} samples accepted, limit {}",
+        samples.len(),
+        limits.max_samples
+    );
+    assert!(
+        samples.iter().all(|v| v.is_finite()),
+        "{what}: non-finite sample accepted"
+    );
+}
+
 /// What the service's `decode` returns must be a record the diagnosis may be handed.
 pub fn check_decoded(d: &Decoded, limits: &Limits, body_len: usize, what: &str) {
-    assert!(!d.samples.is_empty(), "{what}: empty record accepted");
+    assert!(!d.channels.is_empty(), "{what}: a record without channels accepted");
+    for (name, samples) in &d.channels {
+        check_channel(samples, limits, &format!("{what}, channel {name}"));
+    }
     assert!(
-        d.samples.len() <= limits.max_samples,
-        "{what}: {} samples accepted, limit {}",
-        d.samples.len(),
+        d.channels.iter().map(|c| c.1.len()).sum::<usize>() <= limits.max_samples,
+        "{what}: more samples than the limit {} over all channels",
         limits.max_samples
     );
     assert!(
         body_len <= limits.max_body_bytes,
         "{what}: body of {body_len} bytes accepted, limit {}",
         limits.max_body_bytes
-    );
-    assert!(
-        d.samples.iter().all(|v| v.is_finite()),
-        "{what}: non-finite sample accepted"
     );
     assert!(
         d.sample_rate_hz.is_finite() && d.sample_rate_hz > 0.0,
@@ -149,10 +161,10 @@ pub fn json_body(data: &[u8]) {
         match decode(BodyFormat::Json, &q, data, &limits) {
             Ok(d) => {
                 check_decoded(&d, &limits, data.len(), &what);
+                let n: usize = d.channels.iter().map(|c| c.1.len()).sum();
                 assert!(
-                    d.samples.len() <= data.len() / 2,
-                    "{what}: {} samples from {} bytes",
-                    d.samples.len(),
+                    n <= data.len() / 2,
+                    "{what}: {n} samples from {} bytes",
                     data.len()
                 );
             }

@@ -35,6 +35,7 @@ pub mod fuzzing;
 pub mod gearbox;
 pub mod keys;
 pub mod model;
+pub mod novelty;
 pub mod plot;
 pub mod record;
 pub mod service;

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 
 use super::common::load_gearbox;
@@ -21,8 +21,33 @@ pub enum GearboxCommand {
     /// Every shaft rate and mesh frequency at an input-shaft rate (JSON).
     Kinematics(KinematicsArgs),
     /// Validate a description and show what it resolves to: the assumed values, the model's
-    /// reference frequency, the measured lines and the default signature grid (JSON).
+    /// reference frequency, the measured lines and the default signature grid (JSON). With
+    /// `--id`: a gearbox stored in the service's database, with its table job's status.
     Show(ShowArgs),
+    /// Store a description in the service's database (like `PUT /v1/gearboxes/{id}`): a
+    /// running service precomputes its signature table in the background.
+    Add(AddArgs),
+    /// The gearboxes stored in the service's database, with their table status.
+    List(StoreArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct StoreArgs {
+    /// The service's store (same as `serve --database-url`).
+    #[arg(long, env = "DATABASE_URL", default_value = "gearwear.db")]
+    pub database_url: String,
+}
+
+#[derive(Debug, Args)]
+pub struct AddArgs {
+    /// Gearbox description, TOML or JSON.
+    #[arg(long, value_name = "FILE")]
+    pub gearbox: PathBuf,
+    /// Id to store it under (default: the description's name).
+    #[arg(long)]
+    pub id: Option<String>,
+    #[command(flatten)]
+    pub store: StoreArgs,
 }
 
 #[derive(Debug, Args)]
@@ -38,8 +63,21 @@ pub struct KinematicsArgs {
 #[derive(Debug, Args)]
 pub struct ShowArgs {
     /// Gearbox description, TOML or JSON (default: the first paper's rig).
-    #[arg(long, value_name = "FILE")]
+    #[arg(long, value_name = "FILE", conflicts_with = "id")]
     pub gearbox: Option<PathBuf>,
+    /// A gearbox stored in the service's database (`gearbox add`, `PUT /v1/gearboxes/{id}`).
+    #[arg(long)]
+    pub id: Option<String>,
+    #[command(flatten)]
+    pub store: StoreArgs,
+}
+
+fn open_store(url: &str) -> Result<std::sync::Arc<dyn crate::store::Store>> {
+    crate::service::cli::runtime()?.block_on(async {
+        crate::store::connect(url)
+            .await
+            .map_err(|e| anyhow::anyhow!("opening the store {url}: {e}"))
+    })
 }
 
 /// `gearwear gearbox …`.
@@ -58,6 +96,65 @@ pub fn run(a: GearboxArgs) -> Result<()> {
             if !gb.warnings.is_empty() {
                 v["warnings"] = serde_json::json!(gb.warnings);
             }
+            println!("{}", serde_json::to_string_pretty(&v)?);
+        }
+        GearboxCommand::Add(a) => {
+            let text = std::fs::read_to_string(&a.gearbox)
+                .with_context(|| format!("reading {}", a.gearbox.display()))?;
+            let fmt = match a.gearbox.extension().and_then(|e| e.to_str()) {
+                Some("json") => Some(crate::gearbox::TextFormat::Json),
+                Some("toml") => Some(crate::gearbox::TextFormat::Toml),
+                _ => None,
+            };
+            let origin = a.gearbox.display().to_string();
+            let probe = crate::gearbox::GearboxDescription::parse(&text, fmt, &origin)?;
+            let id = a.id.unwrap_or_else(|| probe.name.clone());
+            if crate::service::gearboxes::check_gearbox_id(&id).is_err() {
+                bail!("a gearbox id is 1 to 64 characters of letters, digits, `.`, `_` and `-`, got `{id}`");
+            }
+            if id == crate::service::gearboxes::BUILTIN_ID {
+                bail!("`{id}` is the built-in paper rig; choose another --id");
+            }
+            let (row, _) = crate::service::gearboxes::gearbox_row(&id, &text, fmt, &origin)?;
+            let url = a.store.database_url;
+            let rt = crate::service::cli::runtime()?;
+            let outcome = rt.block_on(async {
+                let st = crate::store::connect(&url)
+                    .await
+                    .map_err(|e| anyhow::anyhow!("opening the store {url}: {e}"))?;
+                let o = st.put_gearbox(&row).await?;
+                st.close().await;
+                anyhow::Ok(o)
+            })?;
+            let what = match outcome {
+                crate::store::PutOutcome::Created => "stored",
+                crate::store::PutOutcome::Replaced => "replaced; its table is recomputed",
+                crate::store::PutOutcome::Unchanged => "unchanged (the same description)",
+            };
+            eprintln!(
+                "gearbox `{id}` {what}; a running `gearwear serve` on this store precomputes its \
+                 table (watch: gearwear gearbox show --id {id})"
+            );
+            println!("{}", serde_json::json!({"id": id, "hash": row.hash, "outcome": format!("{outcome:?}").to_lowercase()}));
+        }
+        GearboxCommand::List(a) => {
+            let st = open_store(&a.database_url)?;
+            let rows = crate::service::cli::runtime()?.block_on(st.list_gearboxes())?;
+            let v: Vec<_> = rows
+                .iter()
+                .map(|r| crate::service::gearboxes::view(r, None, false))
+                .collect();
+            println!("{}", serde_json::to_string_pretty(&v)?);
+        }
+        GearboxCommand::Show(s) if s.id.is_some() => {
+            let id = s.id.unwrap_or_default();
+            let st = open_store(&s.store.database_url)?;
+            let Some(row) = crate::service::cli::runtime()?.block_on(st.get_gearbox(&id))? else {
+                bail!("no gearbox `{id}` in {}; add it with `gearwear gearbox add --gearbox FILE --id {id}`", s.store.database_url);
+            };
+            let d: crate::gearbox::GearboxDescription = serde_json::from_str(&row.description)?;
+            let gb = crate::gearbox::Gearbox::new(d)?;
+            let v = crate::service::gearboxes::view(&row, Some(&gb), true);
             println!("{}", serde_json::to_string_pretty(&v)?);
         }
         GearboxCommand::Show(s) => {

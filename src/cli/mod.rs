@@ -15,6 +15,7 @@ pub mod calibrate;
 pub mod common;
 pub mod diagnose;
 pub mod gearbox;
+pub mod machine;
 pub mod model;
 pub mod model_b;
 pub mod simulate;
@@ -54,6 +55,9 @@ pub enum Command {
     Serve(crate::service::cli::ServeArgs),
     /// Create, list and revoke the service's API keys.
     Keys(crate::service::cli::KeysArgs),
+    /// A machine's configuration in the service's database: its gearbox, input-shaft rate,
+    /// channels.
+    Machine(machine::MachineArgs),
     /// Simulate the signature table for diagnosis (ea × Ω1 × seeds).
     Precompute(diagnose::PrecomputeArgs),
     /// Estimate the wear degree from an accelerometer record.
@@ -75,6 +79,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::ModelB(a) => model_b::run(a),
         Command::Serve(a) => crate::service::cli::serve_cmd(a),
         Command::Keys(a) => crate::service::cli::keys_cmd(a),
+        Command::Machine(a) => machine::run(a),
         Command::Precompute(a) => diagnose::precompute_cmd(a),
         Command::Diagnose(a) => diagnose::diagnose_cmd(a),
         Command::Calibrate(a) => calibrate::calibrate_cmd(a),

@@ -90,13 +90,14 @@ async fn calibrate(
     let format = body_format(headers)?;
     let q = parse_query(query.as_deref())?;
     let bytes = read_body(headers, body_in, limits.max_body_bytes).await?;
+    let dec = decode(format, &q, &bytes, limits)?;
+    let samples = dec.single(q.channel.as_deref())?.to_vec();
     let Decoded {
-        samples,
         sample_rate_hz,
         shaft_hz,
         sensor,
         ..
-    } = decode(format, &q, &bytes, limits)?;
+    } = dec;
     let input = Input {
         samples,
         sample_rate_hz,

@@ -142,7 +142,8 @@ pub enum KeysCommand {
     Revoke { id: String },
 }
 
-fn runtime() -> Result<tokio::runtime::Runtime> {
+/// A runtime for the commands that talk to the store.
+pub fn runtime() -> Result<tokio::runtime::Runtime> {
     tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()

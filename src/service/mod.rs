@@ -21,6 +21,7 @@ use tokio::net::TcpListener;
 use tokio::sync::{Notify, watch};
 use tower_http::trace::TraceLayer;
 
+pub mod assess;
 pub mod auth;
 pub mod calibration;
 pub mod cli;
@@ -28,7 +29,9 @@ pub mod core;
 pub mod dashboard;
 pub mod diagnoser;
 pub mod error;
+pub mod gearboxes;
 pub mod health;
+pub mod machines;
 pub mod metrics;
 pub mod read;
 pub mod records;
@@ -55,6 +58,12 @@ pub struct Inner {
     pub limiter: auth::RateLimiter,
     pub webhook_wake: Notify,
     pub http: reqwest::Client,
+    /// Wakes the table-job worker (a gearbox was stored).
+    pub job_wake: Notify,
+    /// Resolved gearboxes and diagnosers of stored tables.
+    pub tables: gearboxes::Tables,
+    /// The built-in gearbox (the paper's rig), resolved once.
+    pub builtin_gearbox: Arc<crate::gearbox::Gearbox>,
 }
 
 impl std::ops::Deref for AppState {
@@ -87,6 +96,9 @@ impl AppState {
             limiter,
             webhook_wake: Notify::new(),
             http,
+            job_wake: Notify::new(),
+            tables: gearboxes::Tables::default(),
+            builtin_gearbox: Arc::new(crate::gearbox::Gearbox::paper_rig()),
         }))
     }
 }
@@ -96,7 +108,25 @@ impl AppState {
 pub fn router(state: AppState) -> Router {
     let api = Router::new()
         .route("/v1/machines", get(read::list_machines))
-        .route("/v1/machines/{machine_id}", get(read::get_machine))
+        .route(
+            "/v1/machines/{machine_id}",
+            get(read::get_machine).put(machines::put),
+        )
+        .route(
+            "/v1/machines/{machine_id}/baseline",
+            get(machines::get_baseline)
+                .post(machines::post_baseline)
+                .delete(machines::delete_baseline),
+        )
+        .route(
+            "/v1/machines/{machine_id}/baseline/{record_id}",
+            delete(machines::delete_baseline_record),
+        )
+        .route("/v1/gearboxes", get(gearboxes::list))
+        .route(
+            "/v1/gearboxes/{gearbox_id}",
+            get(gearboxes::get).put(gearboxes::put),
+        )
         .route(
             "/v1/machines/{machine_id}/records",
             post(records::post_record),
@@ -146,6 +176,14 @@ pub fn router(state: AppState) -> Router {
 pub const ROUTES: &[(&str, &str)] = &[
     ("GET", "/v1/machines"),
     ("GET", "/v1/machines/{machine_id}"),
+    ("PUT", "/v1/machines/{machine_id}"),
+    ("GET", "/v1/machines/{machine_id}/baseline"),
+    ("POST", "/v1/machines/{machine_id}/baseline"),
+    ("DELETE", "/v1/machines/{machine_id}/baseline"),
+    ("DELETE", "/v1/machines/{machine_id}/baseline/{record_id}"),
+    ("GET", "/v1/gearboxes"),
+    ("GET", "/v1/gearboxes/{gearbox_id}"),
+    ("PUT", "/v1/gearboxes/{gearbox_id}"),
     ("POST", "/v1/machines/{machine_id}/records"),
     ("GET", "/v1/machines/{machine_id}/diagnoses"),
     ("POST", "/v1/machines/{machine_id}/calibration"),
@@ -237,8 +275,12 @@ pub async fn serve(
     listener: TcpListener,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> std::io::Result<()> {
+    if let Err(e) = gearboxes::ensure_builtin(&state).await {
+        tracing::warn!(error = %e, "the built-in gearbox could not be stored (database unavailable?)");
+    }
     let (stop_tx, stop_rx) = watch::channel(false);
     let worker = tokio::spawn(webhooks::worker(state.clone(), stop_rx.clone()));
+    let jobs = tokio::spawn(gearboxes::worker(state.clone(), stop_rx.clone()));
     let retention = tokio::spawn(retention_task(state.clone(), stop_rx));
     let app = router(state.clone());
     let res = axum::serve(listener, app)
@@ -246,6 +288,7 @@ pub async fn serve(
         .await;
     let _ = stop_tx.send(true);
     let _ = worker.await;
+    let _ = jobs.await;
     let _ = retention.await;
     res
 }

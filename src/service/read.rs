@@ -12,7 +12,8 @@ use super::auth::Caller;
 use super::error::{ApiError, ApiResult};
 use super::records::check_machine_id;
 use super::time::{parse_rfc3339, rfc3339};
-use crate::store::{DiagnosisRow, MachineRow};
+use super::gearboxes::BUILTIN_ID;
+use crate::store::{DiagnosisRow, MachineRow, novelty_json, wear_json};
 
 /// How many diagnoses the machine view's wear trend shows.
 const TREND_POINTS: i64 = 200;
@@ -54,6 +55,7 @@ fn machine_summary(m: &MachineRow) -> Value {
         "created_at": rfc3339(m.created_at),
         "updated_at": rfc3339(m.updated_at),
         "last_diagnosis_id": m.last_diagnosis_id,
+        "gearbox": m.gearbox_id.clone().unwrap_or_else(|| BUILTIN_ID.to_string()),
     })
 }
 
@@ -63,16 +65,18 @@ pub fn diagnosis_summary(d: &DiagnosisRow) -> Value {
         "machine_id": d.machine_id,
         "record_id": d.record_id,
         "created_at": rfc3339(d.created_at),
-        "wear_degree": {"estimate": d.ea_estimate, "lower": d.ea_lower, "upper": d.ea_upper},
+        "wear_degree": wear_json(d),
         "alert_level": d.alert_level,
         "motion_state": d.motion_state,
+        "novelty": novelty_json(d),
+        "channel": d.channel,
     })
 }
 
 fn unknown_machine(id: &str) -> ApiError {
     ApiError::not_found(
         "unknown-machine",
-        format!("no machine `{id}`: it has no accepted record yet (machines appear with their first POSTed record)"),
+        format!("no machine `{id}`: it has no accepted record and no configuration yet (machines appear with their first POSTed record or PUT /v1/machines/{id})"),
     )
     .with("machine_id", id)
 }
@@ -113,9 +117,19 @@ pub async fn get_machine(
         s["shaft_hz"] = full["shaft_hz"].clone();
         s["planetary_clearance_elevated"] = full["planetary_clearance_elevated"].clone();
         s["warnings"] = full.get("warnings").cloned().unwrap_or(json!([]));
+        s["alert"] = full.get("alert").cloned().unwrap_or(Value::Null);
+        s["channels"] = full.get("channels").cloned().unwrap_or(Value::Null);
+        s["indicators"] = full.get("indicators").cloned().unwrap_or(Value::Null);
         s
     });
     let mut body = machine_summary(&m);
+    body["configuration"] = super::machines::config_json(&m);
+    let gid = m.gearbox_id.as_deref().unwrap_or(BUILTIN_ID);
+    body["gearbox"] = match app.store.get_gearbox(gid).await? {
+        Some(g) => super::gearboxes::view(&g, None, false),
+        None => json!({"id": gid, "status": "unknown"}),
+    };
+    body["baseline"] = super::machines::baseline_json(&app, &m).await?;
     body["thresholds"] = serde_json::to_value(app.settings.thresholds).unwrap_or(Value::Null);
     body["latest"] = latest.unwrap_or(Value::Null);
     body["trend"] = trend
@@ -124,10 +138,12 @@ pub async fn get_machine(
             json!({
                 "diagnosis_id": d.id,
                 "created_at": rfc3339(d.created_at),
-                "estimate": d.ea_estimate,
-                "lower": d.ea_lower,
-                "upper": d.ea_upper,
+                "estimate": d.has_wear.then_some(d.ea_estimate),
+                "lower": d.has_wear.then_some(d.ea_lower),
+                "upper": d.has_wear.then_some(d.ea_upper),
                 "alert_level": d.alert_level,
+                "novelty": d.novelty_score,
+                "novelty_threshold": d.novelty_threshold,
             })
         })
         .collect::<Vec<_>>()

@@ -243,6 +243,26 @@ pub struct RecordQuery {
     shaft_hz: Option<String>,
     recorded_at: Option<String>,
     sensor: Option<String>,
+    /// Diagnose only this channel of a multichannel record (a name or a 0-based index).
+    pub channel: Option<String>,
+    /// `true`: the record is healthy, part of the machine's baseline.
+    baseline: Option<String>,
+}
+
+impl RecordQuery {
+    /// The `baseline` flag.
+    pub fn baseline(&self) -> ApiResult<bool> {
+        match self.baseline.as_deref() {
+            None | Some("false") | Some("0") => Ok(false),
+            Some("true") | Some("1") => Ok(true),
+            Some(other) => Err(ApiError::bad_request(
+                "invalid-query",
+                "Invalid query parameter",
+                format!("`baseline` is `true` or `false`, got `{other}`"),
+            )
+            .with("parameter", "baseline")),
+        }
+    }
 }
 
 /// Machine ids: 1–64 characters of `A–Z a–z 0–9 . _ -`.
@@ -493,7 +513,8 @@ pub fn parse_query(query: Option<&str>) -> ApiResult<RecordQuery> {
 /// A decoded, validated record and what the request said about it.
 #[derive(Debug, Clone)]
 pub struct Decoded {
-    pub samples: Vec<f64>,
+    /// `(name, samples)` of each channel; a single-channel record's one is named `"0"`.
+    pub channels: Vec<(String, Vec<f64>)>,
     pub sample_rate_hz: f64,
     pub shaft_hz: Option<f64>,
     pub recorded_at: Option<String>,
@@ -511,6 +532,77 @@ fn too_many_samples(samples: usize, limit: usize) -> ApiError {
     )
     .with("limit_samples", limit as u64)
     .with("samples", samples as u64)
+}
+
+impl Decoded {
+    /// The channels to diagnose: the `channel` query parameter's (by name or 0-based index),
+    /// else those the machine lists, else all.
+    pub fn select(&self, wanted: Option<&str>, machine: Option<&[String]>) -> ApiResult<Vec<usize>> {
+        let names = || {
+            self.channels
+                .iter()
+                .map(|(n, _)| format!("`{n}`"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        if let Some(w) = wanted {
+            let by_name = self.channels.iter().position(|(n, _)| n == w);
+            let by_index = w.parse::<usize>().ok().filter(|i| *i < self.channels.len());
+            return match by_name.or(by_index) {
+                Some(i) => Ok(vec![i]),
+                None => Err(ApiError::unprocessable(
+                    "unknown-channel",
+                    "Unknown channel",
+                    format!(
+                        "the record has no channel `{w}`; its channels are {} (name or 0-based index \
+                         in the `channel` query parameter)",
+                        names()
+                    ),
+                )
+                .with("channel", w)),
+            };
+        }
+        if let Some(list) = machine {
+            let picked: Vec<usize> = (0..self.channels.len())
+                .filter(|i| list.contains(&self.channels[*i].0))
+                .collect();
+            if picked.is_empty() && self.channels.len() > 1 {
+                return Err(ApiError::unprocessable(
+                    "unknown-channel",
+                    "Unknown channel",
+                    format!(
+                        "none of the record's channels ({}) is one the machine records ({}); \
+                         name one with the `channel` query parameter or update the machine's \
+                         `channels`",
+                        names(),
+                        list.join(", ")
+                    ),
+                ));
+            }
+            if !picked.is_empty() {
+                return Ok(picked);
+            }
+        }
+        Ok((0..self.channels.len()).collect())
+    }
+
+    /// The one channel of a record an endpoint needs one of: the `channel` query parameter's,
+    /// or the only one.
+    pub fn single(&self, wanted: Option<&str>) -> ApiResult<&[f64]> {
+        if wanted.is_none() && self.channels.len() > 1 {
+            return Err(ApiError::unprocessable(
+                "several-channels",
+                "Several channels",
+                format!(
+                    "the record has {} channels ({}); choose one with the `channel` query parameter",
+                    self.channels.len(),
+                    self.channels.iter().map(|(n, _)| n.as_str()).collect::<Vec<_>>().join(", ")
+                ),
+            ));
+        }
+        let i = self.select(wanted, None)?[0];
+        Ok(&self.channels[i].1)
+    }
 }
 
 /// Decode and validate a record body of `format` (JSON body fields win over the query),
@@ -590,7 +682,7 @@ pub fn decode(
     }
 
     Ok(Decoded {
-        samples,
+        channels: vec![("0".to_string(), samples)],
         sample_rate_hz: fs,
         shaft_hz: shaft,
         recorded_at,
@@ -683,48 +775,94 @@ async fn ingest(
         return replay(app, &prev, &request_hash);
     }
 
-    let Decoded {
-        samples,
-        sample_rate_hz: fs,
-        shaft_hz: shaft,
-        recorded_at,
-        sensor,
-    } = decode(format, &q, &bytes, limits)?;
+    let dec = decode(format, &q, &bytes, limits)?;
+    let baseline = q.baseline()?;
 
-    // Diagnose off the async runtime, with the machine's calibration if it has one.
+    // The machine's gearbox (and its table, when ready), baseline and calibration.
+    let ctx = super::machines::context(app, machine_id).await?;
+    let chosen = dec.select(
+        q.channel.as_deref(),
+        ctx.machine.as_ref().and_then(|m| m.channels.as_deref()),
+    )?;
+    let (baselines, baseline_counts) =
+        super::machines::baselines(app, machine_id, &ctx.gearbox_row.hash).await?;
     let calibration = app
         .store
         .get_calibration(machine_id)
         .await?
         .map(|c| MachineCalibration::from_row(&c));
-    let input = Input {
-        samples,
+    let table_note = ctx.table_note();
+    let job = ChannelJob {
+        dec,
+        chosen,
+        shaft: None,
+        calibration,
+        diagnoser: ctx.diagnoser.clone(),
+        gearbox: ctx.gearbox.clone(),
+        input_shaft_hz: ctx.input_shaft_hz(),
+        baselines,
+        thresholds: app.settings.thresholds,
+        table_note: table_note.clone(),
+    };
+    let (dec, results, spectrum) = tokio::task::spawn_blocking(move || job.run())
+        .await
+        .map_err(|e| ApiError::internal(format!("the diagnosis task failed: {e}")))?
+        .map_err(|e| problem_from_error(&e))?;
+    let Decoded {
+        channels,
         sample_rate_hz: fs,
         shaft_hz: shaft,
-        sensor: sensor.clone(),
-        calibration,
-    };
-    let diag = app.diagnoser.clone();
-    let (input, out) = tokio::task::spawn_blocking(move || {
-        let out = diag.diagnose(&input).map(|mut o| {
-            let sp = match o.spectrum.take() {
-                Some(s) => plot_from_spectrum(&s, o.f1_hz, &o.marks),
-                None => plot_spectrum(&input.samples, input.sample_rate_hz, o.f1_hz, &o.marks),
-            };
-            (o, sp)
-        });
-        (input, out)
-    })
-    .await
-    .map_err(|e| ApiError::internal(format!("the diagnosis task failed: {e}")))?;
-    let (out, spectrum) = out.map_err(|e| problem_from_error(&e))?;
+        recorded_at,
+        sensor,
+    } = dec;
+    let di = super::assess::deciding(&results);
+    let decide = &results[di];
 
     // Build everything, then store it in one transaction.
     let now = now_ms();
     let record_id = new_id();
     let diagnosis_id = new_id();
-    let level = app.settings.thresholds.level(out.ea_estimate);
-    let mut response = out.diagnosis.clone();
+    let level = decide.alert.level;
+    let mut body = match &decide.output {
+        Some(o) => o.diagnosis.clone(),
+        None => json!({
+            "wear_degree": null,
+            "motion_state": "unknown",
+            "sensor": sensor.clone().unwrap_or_default(),
+            "warnings": [],
+        }),
+    };
+    if let Value::Object(m) = &mut body {
+        m.insert("channel".into(), decide.name.clone().into());
+        if results.len() > 1 {
+            m.insert(
+                "channels".into(),
+                results.iter().map(|r| r.summary()).collect::<Vec<_>>().into(),
+            );
+        }
+        m.insert("gearbox".into(), ctx.json());
+        m.insert(
+            "novelty".into(),
+            serde_json::to_value(&decide.novelty).unwrap_or(Value::Null),
+        );
+        m.insert(
+            "baseline".into(),
+            json!({
+                "records": baseline_counts.get(&decide.name).copied().unwrap_or(0),
+                "min_records": crate::novelty::MIN_BASELINE_RECORDS,
+                "this_record": baseline,
+            }),
+        );
+        m.insert("indicators".into(), decide.features.indicators.clone());
+        m.insert(
+            "alert".into(),
+            serde_json::to_value(&decide.alert).unwrap_or(Value::Null),
+        );
+        if let (Some(note), Some(Value::Array(w))) = (&table_note, m.get_mut("warnings")) {
+            w.push(note.clone().into());
+        }
+    }
+    let mut response = body.clone();
     if let Value::Object(m) = &mut response {
         m.insert("id".into(), diagnosis_id.clone().into());
         m.insert("machine_id".into(), machine_id.into());
@@ -734,6 +872,28 @@ async fn ingest(
     }
     let response_text = response.to_string();
     let keep_raw = !app.settings.raw_retention.is_zero();
+    let mut features = match &decide.output {
+        Some(o) => o.features.clone(),
+        None => json!({}),
+    };
+    features["gearbox_id"] = ctx.gearbox_row.id.clone().into();
+    features["gearbox_hash"] = ctx.gearbox_row.hash.clone().into();
+    features["channels"] = results
+        .iter()
+        .map(|r| {
+            (
+                r.name.clone(),
+                json!({"novelty_features": r.features, "alert_level": r.alert.level}),
+            )
+        })
+        .collect::<serde_json::Map<_, _>>()
+        .into();
+    let sample_count = channels.first().map(|c| c.1.len()).unwrap_or(0);
+    let multi = channels.len() > 1;
+    let (ea, lower, upper, motion) = match &decide.output {
+        Some(o) => (o.ea_estimate, o.ea_lower, o.ea_upper, o.motion_state.clone()),
+        None => (0.0, 0.0, 0.0, "unknown".to_string()),
+    };
     let ing = Ingest {
         record: NewRecord {
             id: record_id.clone(),
@@ -742,12 +902,20 @@ async fn ingest(
             recorded_at,
             sensor,
             content_type: format.mime().into(),
-            sample_rate_hz: input.sample_rate_hz,
-            shaft_hz: input.shaft_hz,
-            sample_count: input.samples.len() as i64,
+            sample_rate_hz: fs,
+            shaft_hz: shaft,
+            sample_count: sample_count as i64,
             sha256: body_sha256,
-            features: out.features.to_string(),
-            samples: keep_raw.then(|| f32_bytes(&input.samples)),
+            features: features.to_string(),
+            samples: keep_raw.then(|| {
+                let mut v = Vec::with_capacity(4 * sample_count * channels.len());
+                for (_, x) in &channels {
+                    v.extend_from_slice(&f32_bytes(x));
+                }
+                v
+            }),
+            baseline,
+            channels: multi.then(|| channels.iter().map(|c| c.0.clone()).collect()),
         },
         diagnosis: DiagnosisRow {
             seq: 0,
@@ -755,13 +923,17 @@ async fn ingest(
             record_id,
             machine_id: machine_id.to_string(),
             created_at: now,
-            ea_estimate: out.ea_estimate,
-            ea_lower: out.ea_lower,
-            ea_upper: out.ea_upper,
+            ea_estimate: ea,
+            ea_lower: lower,
+            ea_upper: upper,
             alert_level: level.into(),
-            motion_state: out.motion_state.clone(),
-            body: out.diagnosis.to_string(),
+            motion_state: motion,
+            body: body.to_string(),
             spectrum: serde_json::to_string(&spectrum).unwrap_or_else(|_| "null".into()),
+            has_wear: decide.output.is_some(),
+            novelty_score: decide.novelty.as_ref().map(|n| n.score),
+            novelty_threshold: decide.novelty.as_ref().map(|n| n.threshold),
+            channel: Some(decide.name.clone()),
         },
         idempotency: idem_key.as_ref().map(|k| IdemRow {
             key_id: key_id.clone(),
@@ -787,7 +959,7 @@ async fn ingest(
     }
     app.metrics.records_accepted.fetch_add(1, Ordering::Relaxed);
     app.webhook_wake.notify_one();
-    tracing::info!(machine = machine_id, diagnosis = %diagnosis_id, ea = out.ea_estimate, alert_level = level, "record accepted");
+    tracing::info!(machine = machine_id, diagnosis = %diagnosis_id, ea, alert_level = level, "record accepted");
     let mut r = (StatusCode::CREATED, response_text).into_response();
     let h = r.headers_mut();
     h.insert(
@@ -798,6 +970,85 @@ async fn ingest(
         h.insert(header::LOCATION, v);
     }
     Ok(r)
+}
+
+/// Everything the blocking part of an ingest needs: each chosen channel diagnosed (when the
+/// table is ready), its features, its novelty, its alert; the spectrum plot of the deciding
+/// channel.
+struct ChannelJob {
+    dec: Decoded,
+    chosen: Vec<usize>,
+    shaft: Option<f64>,
+    calibration: Option<MachineCalibration>,
+    diagnoser: Option<std::sync::Arc<dyn super::diagnoser::Diagnoser>>,
+    gearbox: std::sync::Arc<crate::gearbox::Gearbox>,
+    input_shaft_hz: Option<f64>,
+    baselines: std::collections::BTreeMap<String, crate::novelty::MachineBaseline>,
+    thresholds: crate::configuration::Thresholds,
+    table_note: Option<String>,
+}
+
+type JobResult = (
+    Decoded,
+    Vec<super::assess::ChannelResult>,
+    Option<super::spectrum::PlotSpectrum>,
+);
+
+impl ChannelJob {
+    fn run(self) -> crate::Result<JobResult> {
+        use super::assess::{ChannelResult, alert, deciding};
+        let fs = self.dec.sample_rate_hz;
+        let shaft = self.shaft.or(self.dec.shaft_hz);
+        let mut results = Vec::with_capacity(self.chosen.len());
+        for &i in &self.chosen {
+            let (name, samples) = &self.dec.channels[i];
+            let rec = crate::record::Record {
+                samples: samples.clone(),
+                sample_rate: fs,
+            };
+            let output = match &self.diagnoser {
+                Some(d) => Some(d.diagnose(&Input {
+                    samples: samples.clone(),
+                    sample_rate_hz: fs,
+                    shaft_hz: shaft,
+                    sensor: self.dec.sensor.clone(),
+                    calibration: self.calibration.clone(),
+                })?),
+                None => None,
+            };
+            let hint = shaft
+                .or(self.input_shaft_hz)
+                .or(output.as_ref().map(|o| o.f1_hz / self.gearbox.f1_per_input_hz));
+            let features = crate::novelty::record_features(&rec, Some(&self.gearbox), hint)?;
+            let novelty = self.baselines.get(name).map(|b| b.score(&features));
+            let alert = alert(
+                output.as_ref().map(ChannelResult::wear),
+                novelty.as_ref(),
+                &self.thresholds,
+                self.table_note.as_deref(),
+            );
+            results.push(ChannelResult {
+                name: name.clone(),
+                output,
+                features,
+                novelty,
+                alert,
+            });
+        }
+        let di = deciding(&results);
+        let samples = &self.dec.channels[self.chosen[di]].1;
+        let spectrum = match results[di].output.as_mut() {
+            Some(o) => match o.spectrum.take() {
+                Some(s) => plot_from_spectrum(&s, o.f1_hz, &o.marks),
+                None => plot_spectrum(samples, fs, o.f1_hz, &o.marks),
+            },
+            None => {
+                let f1 = self.input_shaft_hz.map(|h| self.gearbox.f1_hz(h)).unwrap_or(f64::NAN);
+                plot_spectrum(samples, fs, f1, &[])
+            }
+        };
+        Ok((self.dec, results, spectrum))
+    }
 }
 
 fn replay(app: &AppState, prev: &IdemRow, request_hash: &str) -> ApiResult<Response> {

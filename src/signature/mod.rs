@@ -35,7 +35,7 @@ use serde::{Deserialize, Serialize};
 use crate::model::Frequencies;
 use crate::signal::lines::LineMeasurement;
 
-pub use table::{SignatureTable, model_hash};
+pub use table::{SignatureTable, SimulationSettings, model_hash};
 
 /// What the simulated "sensor" measures.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]

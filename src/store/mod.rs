@@ -107,6 +107,69 @@ pub struct MachineRow {
     pub record_count: i64,
     pub last_diagnosis_id: Option<String>,
     pub alert_level: String,
+    /// Its gearbox (`gearboxes.id`); `None`: the paper's rig.
+    pub gearbox_id: Option<String>,
+    /// Nominal input-shaft rate (Hz), a hint for finding the mesh lines.
+    pub input_shaft_hz: Option<f64>,
+    /// The channel names it records; `None`: whatever a record brings.
+    pub channels: Option<Vec<String>>,
+}
+
+/// What `PUT /v1/machines/{id}` sets.
+#[derive(Debug, Clone)]
+pub struct MachineConfig {
+    pub id: String,
+    pub gearbox_id: Option<String>,
+    pub input_shaft_hz: Option<f64>,
+    pub channels: Option<Vec<String>>,
+}
+
+/// A stored gearbox and the state of its signature-table job (without the table itself).
+#[derive(Debug, Clone)]
+pub struct GearboxRow {
+    pub id: String,
+    pub name: String,
+    /// The description as submitted.
+    pub source: String,
+    /// `toml` or `json`.
+    pub source_format: String,
+    /// Canonical JSON of the description.
+    pub description: String,
+    pub hash: String,
+    /// The paper's rig: its table is the served signatures file.
+    pub builtin: bool,
+    /// `queued`, `running`, `ready`, `failed`.
+    pub status: String,
+    /// 0–1 while running.
+    pub progress: f64,
+    pub error: Option<String>,
+    pub claimed_by: Option<String>,
+    pub lease_until: i64,
+    pub attempts: i64,
+    pub created_at: i64,
+    pub updated_at: i64,
+    pub started_at: Option<i64>,
+    pub finished_at: Option<i64>,
+}
+
+/// What a `put_gearbox` did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PutOutcome {
+    Created,
+    /// Another description under the same id: its table is recomputed.
+    Replaced,
+    /// The same description again: nothing changes.
+    Unchanged,
+}
+
+/// A baseline record's stored features.
+#[derive(Debug, Clone)]
+pub struct BaselineRecord {
+    pub id: String,
+    pub received_at: i64,
+    pub baseline_at: Option<i64>,
+    /// The record's features JSON (as stored with it).
+    pub features: String,
 }
 
 /// A diagnosis; `body`/`spectrum` are JSON texts, empty in summaries.
@@ -124,6 +187,13 @@ pub struct DiagnosisRow {
     pub motion_state: String,
     pub body: String,
     pub spectrum: String,
+    /// False when the diagnosis has no wear degree (its gearbox's table was not ready).
+    pub has_wear: bool,
+    /// Novelty against the machine's baseline (deciding channel), when it has one.
+    pub novelty_score: Option<f64>,
+    pub novelty_threshold: Option<f64>,
+    /// The channel that decides the alert.
+    pub channel: Option<String>,
 }
 
 /// An accepted record's metadata, features and (optionally) raw samples.
@@ -141,8 +211,13 @@ pub struct NewRecord {
     pub sha256: String,
     /// JSON: lines and condition indicators.
     pub features: String,
-    /// Little-endian f32 samples, `None` when retention is zero.
+    /// Little-endian f32 samples, `None` when retention is zero (several channels: one after
+    /// another, in the order of `channels`).
     pub samples: Option<Vec<u8>>,
+    /// Marked healthy: part of the machine's baseline.
+    pub baseline: bool,
+    /// Channel names of a multichannel record.
+    pub channels: Option<Vec<String>>,
 }
 
 /// The stored response to an `Idempotency-Key`.
@@ -228,6 +303,25 @@ pub fn level_rank(level: &str) -> usize {
     LEVELS.iter().position(|l| *l == level).unwrap_or(0)
 }
 
+/// `{estimate, lower, upper}`, or null for a diagnosis without a wear degree.
+pub fn wear_json(d: &DiagnosisRow) -> serde_json::Value {
+    if d.has_wear {
+        serde_json::json!({"estimate": d.ea_estimate, "lower": d.ea_lower, "upper": d.ea_upper})
+    } else {
+        serde_json::Value::Null
+    }
+}
+
+/// `{score, threshold, anomalous}`, or null without a baseline.
+pub fn novelty_json(d: &DiagnosisRow) -> serde_json::Value {
+    match (d.novelty_score, d.novelty_threshold) {
+        (Some(s), Some(t)) => {
+            serde_json::json!({"score": s, "threshold": t, "anomalous": s > t})
+        }
+        _ => serde_json::Value::Null,
+    }
+}
+
 /// The webhook events an ingest raises, given the machine's previous alert level:
 /// `diagnosis.created` always, `wear.threshold_crossed` when the level rises to warning or
 /// alarm. Payloads are JSON texts.
@@ -239,9 +333,11 @@ pub fn ingest_events(prev_level: &str, ing: &Ingest, event_id: &str) -> Vec<(Str
         "diagnosis_id": d.id,
         "record_id": d.record_id,
         "created_at": crate::service::time::rfc3339(d.created_at),
-        "wear_degree": {"estimate": d.ea_estimate, "lower": d.ea_lower, "upper": d.ea_upper},
+        "wear_degree": wear_json(d),
         "alert_level": d.alert_level,
         "motion_state": d.motion_state,
+        "novelty": novelty_json(d),
+        "channel": d.channel,
     });
     let mut out = Vec::new();
     let mut created = base.clone();
@@ -326,6 +422,72 @@ pub trait Store: Send + Sync + 'static {
     async fn get_calibration(&self, machine_id: &str) -> StoreResult<Option<CalibrationRow>>;
     /// Clear it; `false` if the machine had none.
     async fn delete_calibration(&self, machine_id: &str) -> StoreResult<bool>;
+
+    /// Store a gearbox description. A new id is queued for its table; the same id with another
+    /// description is replaced and queued again (its table dropped); the same description again
+    /// changes nothing.
+    async fn put_gearbox(&self, g: &GearboxRow) -> StoreResult<PutOutcome>;
+    /// Insert or refresh the built-in gearbox (status `ready`, its table served from a file).
+    async fn ensure_builtin_gearbox(&self, g: &GearboxRow) -> StoreResult<()>;
+    async fn get_gearbox(&self, id: &str) -> StoreResult<Option<GearboxRow>>;
+    async fn list_gearboxes(&self) -> StoreResult<Vec<GearboxRow>>;
+    /// The signature table JSON of a `ready` gearbox whose description hash is `hash`.
+    async fn gearbox_table(&self, id: &str, hash: &str) -> StoreResult<Option<String>>;
+    /// Claim one table job for `worker` until `now + lease_ms`: a queued one, or a running one
+    /// whose lease ran out (its replica stopped). Compare-and-set: one replica wins each job.
+    async fn claim_gearbox_job(
+        &self,
+        now: i64,
+        lease_ms: i64,
+        worker: &str,
+    ) -> StoreResult<Option<GearboxRow>>;
+    /// Progress of a claimed job, renewing its lease; `false` when `worker` no longer holds
+    /// it (the lease ran out and another replica took it, or the description was replaced).
+    async fn gearbox_progress(
+        &self,
+        id: &str,
+        hash: &str,
+        worker: &str,
+        progress: f64,
+        lease_until: i64,
+        now: i64,
+    ) -> StoreResult<bool>;
+    /// Finish a claimed job: `Ok(table JSON)` → `ready`, `Err(reason)` → `failed`. `false`
+    /// when `worker` no longer holds it (nothing is written).
+    async fn finish_gearbox_job(
+        &self,
+        id: &str,
+        hash: &str,
+        worker: &str,
+        result: Result<String, String>,
+        now: i64,
+    ) -> StoreResult<bool>;
+
+    /// Give a claimed job back (the replica is stopping): queued again at once, for any
+    /// replica, instead of after its lease.
+    async fn release_gearbox_job(&self, id: &str, hash: &str, worker: &str) -> StoreResult<bool>;
+
+    /// Create or update a machine's configuration; `true` when the machine is new.
+    async fn put_machine(&self, m: &MachineConfig, now: i64) -> StoreResult<bool>;
+    /// Mark (or unmark) records of one machine as baseline; how many changed. Ids of other
+    /// machines' records are ignored.
+    async fn set_baseline(
+        &self,
+        machine_id: &str,
+        record_ids: &[String],
+        baseline: bool,
+        now: i64,
+    ) -> StoreResult<u64>;
+    /// Unmark every baseline record of a machine; how many.
+    async fn clear_baseline(&self, machine_id: &str) -> StoreResult<u64>;
+    /// The machine's baseline records with their features, oldest first.
+    async fn baseline_records(&self, machine_id: &str) -> StoreResult<Vec<BaselineRecord>>;
+    /// Which of these record ids belong to the machine.
+    async fn machine_record_ids(
+        &self,
+        machine_id: &str,
+        record_ids: &[String],
+    ) -> StoreResult<Vec<String>>;
 }
 
 /// Open the store a URL names: `postgres://…` / `postgresql://…` → PostgreSQL, anything else
@@ -382,8 +544,39 @@ macro_rules! impl_store {
                 record_count: r.try_get("record_count")?,
                 last_diagnosis_id: r.try_get("last_diagnosis_id")?,
                 alert_level: r.try_get("alert_level")?,
+                gearbox_id: r.try_get("gearbox_id")?,
+                input_shaft_hz: r.try_get("input_shaft_hz")?,
+                channels: r
+                    .try_get::<Option<String>, _>("channels")?
+                    .and_then(|c| serde_json::from_str(&c).ok()),
             })
         }
+
+        fn gearbox_row(r: &<$db as sqlx::Database>::Row) -> StoreResult<GearboxRow> {
+            Ok(GearboxRow {
+                id: r.try_get("id")?,
+                name: r.try_get("name")?,
+                source: r.try_get("source")?,
+                source_format: r.try_get("source_format")?,
+                description: r.try_get("description")?,
+                hash: r.try_get("hash")?,
+                builtin: r.try_get::<i64, _>("builtin")? != 0,
+                status: r.try_get("status")?,
+                progress: r.try_get("progress")?,
+                error: r.try_get("error")?,
+                claimed_by: r.try_get("claimed_by")?,
+                lease_until: r.try_get("lease_until")?,
+                attempts: r.try_get("attempts")?,
+                created_at: r.try_get("created_at")?,
+                updated_at: r.try_get("updated_at")?,
+                started_at: r.try_get("started_at")?,
+                finished_at: r.try_get("finished_at")?,
+            })
+        }
+
+        const GEARBOX_COLS: &str = "id, name, source, source_format, description, hash, builtin, \
+            status, progress, error, claimed_by, lease_until, attempts, created_at, updated_at, \
+            started_at, finished_at";
 
         fn diagnosis_row(r: &<$db as sqlx::Database>::Row, full: bool) -> StoreResult<DiagnosisRow> {
             Ok(DiagnosisRow {
@@ -399,6 +592,10 @@ macro_rules! impl_store {
                 motion_state: r.try_get("motion_state")?,
                 body: if full { r.try_get("body")? } else { String::new() },
                 spectrum: if full { r.try_get("spectrum")? } else { String::new() },
+                has_wear: r.try_get::<i64, _>("has_wear")? != 0,
+                novelty_score: r.try_get("novelty_score")?,
+                novelty_threshold: r.try_get("novelty_threshold")?,
+                channel: r.try_get("channel")?,
             })
         }
 
@@ -428,7 +625,8 @@ macro_rules! impl_store {
         }
 
         const SUMMARY_COLS: &str = "seq, id, record_id, machine_id, created_at, ea_estimate, \
-            ea_lower, ea_upper, alert_level, motion_state";
+            ea_lower, ea_upper, alert_level, motion_state, has_wear, novelty_score, \
+            novelty_threshold, channel";
 
         fn is_unique_violation(e: &sqlx::Error) -> bool {
             matches!(e, sqlx::Error::Database(d) if d.is_unique_violation())
@@ -478,7 +676,8 @@ macro_rules! impl_store {
                 sqlx::query(
                     "INSERT INTO records (id, machine_id, received_at, recorded_at, sensor, \
                      content_type, sample_rate_hz, shaft_hz, sample_count, sha256, features, \
-                     samples) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12)",
+                     samples, baseline, baseline_at, channels) \
+                     VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15)",
                 )
                 .bind(&rec.id)
                 .bind(&rec.machine_id)
@@ -492,12 +691,16 @@ macro_rules! impl_store {
                 .bind(&rec.sha256)
                 .bind(&rec.features)
                 .bind(&rec.samples)
+                .bind(rec.baseline as i64)
+                .bind(rec.baseline.then_some(rec.received_at))
+                .bind(rec.channels.as_ref().map(|c| serde_json::to_string(c).unwrap_or_default()))
                 .execute(&mut **tx)
                 .await?;
                 sqlx::query(
                     "INSERT INTO diagnoses (id, record_id, machine_id, created_at, ea_estimate, \
-                     ea_lower, ea_upper, alert_level, motion_state, body, spectrum) \
-                     VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11)",
+                     ea_lower, ea_upper, alert_level, motion_state, body, spectrum, has_wear, \
+                     novelty_score, novelty_threshold, channel) \
+                     VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15)",
                 )
                 .bind(&d.id)
                 .bind(&d.record_id)
@@ -510,6 +713,10 @@ macro_rules! impl_store {
                 .bind(&d.motion_state)
                 .bind(&d.body)
                 .bind(&d.spectrum)
+                .bind(d.has_wear as i64)
+                .bind(d.novelty_score)
+                .bind(d.novelty_threshold)
+                .bind(&d.channel)
                 .execute(&mut **tx)
                 .await?;
                 sqlx::query(
@@ -978,6 +1185,354 @@ macro_rules! impl_store {
                     .execute(&self.pool)
                     .await?;
                 Ok(r.rows_affected() == 1)
+            }
+
+            async fn put_gearbox(&self, g: &GearboxRow) -> StoreResult<PutOutcome> {
+                let mut tx = self.pool.begin().await?;
+                // A write first (SQLite takes its write lock at once).
+                let ins = sqlx::query(
+                    "INSERT INTO gearboxes (id, name, source, source_format, description, hash, \
+                     builtin, status, progress, created_at, updated_at) \
+                     VALUES ($1, $2, $3, $4, $5, $6, 0, 'queued', 0, $7, $7) \
+                     ON CONFLICT (id) DO NOTHING",
+                )
+                .bind(&g.id)
+                .bind(&g.name)
+                .bind(&g.source)
+                .bind(&g.source_format)
+                .bind(&g.description)
+                .bind(&g.hash)
+                .bind(g.created_at)
+                .execute(&mut *tx)
+                .await?;
+                let outcome = if ins.rows_affected() == 1 {
+                    PutOutcome::Created
+                } else {
+                    let upd = sqlx::query(
+                        "UPDATE gearboxes SET name = $2, source = $3, source_format = $4, \
+                         description = $5, hash = $6, status = 'queued', progress = 0, \
+                         error = NULL, claimed_by = NULL, lease_until = 0, attempts = 0, \
+                         signature_table = NULL, updated_at = $7, started_at = NULL, \
+                         finished_at = NULL WHERE id = $1 AND hash <> $6 AND builtin = 0",
+                    )
+                    .bind(&g.id)
+                    .bind(&g.name)
+                    .bind(&g.source)
+                    .bind(&g.source_format)
+                    .bind(&g.description)
+                    .bind(&g.hash)
+                    .bind(g.created_at)
+                    .execute(&mut *tx)
+                    .await?;
+                    if upd.rows_affected() == 1 {
+                        PutOutcome::Replaced
+                    } else {
+                        let builtin: i64 =
+                            sqlx::query("SELECT builtin FROM gearboxes WHERE id = $1")
+                                .bind(&g.id)
+                                .fetch_one(&mut *tx)
+                                .await?
+                                .try_get("builtin")?;
+                        let same: i64 = sqlx::query(
+                            "SELECT COUNT(*) AS n FROM gearboxes WHERE id = $1 AND hash = $2",
+                        )
+                        .bind(&g.id)
+                        .bind(&g.hash)
+                        .fetch_one(&mut *tx)
+                        .await?
+                        .try_get("n")?;
+                        if builtin != 0 && same == 0 {
+                            return Err(StoreError::Conflict(format!(
+                                "gearbox `{}` is built in and cannot be replaced",
+                                g.id
+                            )));
+                        }
+                        PutOutcome::Unchanged
+                    }
+                };
+                tx.commit().await?;
+                Ok(outcome)
+            }
+
+            async fn ensure_builtin_gearbox(&self, g: &GearboxRow) -> StoreResult<()> {
+                sqlx::query(
+                    "INSERT INTO gearboxes (id, name, source, source_format, description, hash, \
+                     builtin, status, progress, created_at, updated_at, finished_at) \
+                     VALUES ($1, $2, $3, $4, $5, $6, 1, 'ready', 1, $7, $7, $7) \
+                     ON CONFLICT (id) DO UPDATE SET name = excluded.name, \
+                     source = excluded.source, source_format = excluded.source_format, \
+                     description = excluded.description, hash = excluded.hash, builtin = 1, \
+                     status = 'ready', progress = 1, error = NULL, signature_table = NULL, \
+                     updated_at = excluded.updated_at \
+                     WHERE gearboxes.hash <> excluded.hash OR gearboxes.builtin = 0",
+                )
+                .bind(&g.id)
+                .bind(&g.name)
+                .bind(&g.source)
+                .bind(&g.source_format)
+                .bind(&g.description)
+                .bind(&g.hash)
+                .bind(g.created_at)
+                .execute(&self.pool)
+                .await?;
+                Ok(())
+            }
+
+            async fn get_gearbox(&self, id: &str) -> StoreResult<Option<GearboxRow>> {
+                let r = sqlx::query(sqlx::AssertSqlSafe(format!(
+                    "SELECT {GEARBOX_COLS} FROM gearboxes WHERE id = $1"
+                )))
+                .bind(id)
+                .fetch_optional(&self.pool)
+                .await?;
+                r.as_ref().map(gearbox_row).transpose()
+            }
+
+            async fn list_gearboxes(&self) -> StoreResult<Vec<GearboxRow>> {
+                let rows = sqlx::query(sqlx::AssertSqlSafe(format!(
+                    "SELECT {GEARBOX_COLS} FROM gearboxes ORDER BY id"
+                )))
+                .fetch_all(&self.pool)
+                .await?;
+                rows.iter().map(gearbox_row).collect()
+            }
+
+            async fn gearbox_table(&self, id: &str, hash: &str) -> StoreResult<Option<String>> {
+                let r = sqlx::query(
+                    "SELECT signature_table FROM gearboxes \
+                     WHERE id = $1 AND hash = $2 AND status = 'ready'",
+                )
+                .bind(id)
+                .bind(hash)
+                .fetch_optional(&self.pool)
+                .await?;
+                Ok(match r {
+                    Some(r) => r.try_get("signature_table")?,
+                    None => None,
+                })
+            }
+
+            async fn claim_gearbox_job(
+                &self,
+                now: i64,
+                lease_ms: i64,
+                worker: &str,
+            ) -> StoreResult<Option<GearboxRow>> {
+                let due = sqlx::query(
+                    "SELECT id, hash FROM gearboxes WHERE builtin = 0 AND (status = 'queued' \
+                     OR (status = 'running' AND lease_until < $1)) \
+                     ORDER BY updated_at, id LIMIT 4",
+                )
+                .bind(now)
+                .fetch_all(&self.pool)
+                .await?;
+                for r in due {
+                    let id: String = r.try_get("id")?;
+                    let hash: String = r.try_get("hash")?;
+                    // Compare-and-set: only one replica wins each job.
+                    let c = sqlx::query(
+                        "UPDATE gearboxes SET status = 'running', claimed_by = $3, \
+                         lease_until = $4, attempts = attempts + 1, updated_at = $2, \
+                         started_at = COALESCE(started_at, $2) \
+                         WHERE id = $1 AND hash = $5 AND builtin = 0 AND (status = 'queued' \
+                         OR (status = 'running' AND lease_until < $2))",
+                    )
+                    .bind(&id)
+                    .bind(now)
+                    .bind(worker)
+                    .bind(now + lease_ms)
+                    .bind(&hash)
+                    .execute(&self.pool)
+                    .await?;
+                    if c.rows_affected() == 1 {
+                        return self.get_gearbox(&id).await;
+                    }
+                }
+                Ok(None)
+            }
+
+            async fn gearbox_progress(
+                &self,
+                id: &str,
+                hash: &str,
+                worker: &str,
+                progress: f64,
+                lease_until: i64,
+                now: i64,
+            ) -> StoreResult<bool> {
+                let r = sqlx::query(
+                    "UPDATE gearboxes SET progress = $4, lease_until = $5, updated_at = $6 \
+                     WHERE id = $1 AND hash = $2 AND claimed_by = $3 AND status = 'running'",
+                )
+                .bind(id)
+                .bind(hash)
+                .bind(worker)
+                .bind(progress)
+                .bind(lease_until)
+                .bind(now)
+                .execute(&self.pool)
+                .await?;
+                Ok(r.rows_affected() == 1)
+            }
+
+            async fn finish_gearbox_job(
+                &self,
+                id: &str,
+                hash: &str,
+                worker: &str,
+                result: Result<String, String>,
+                now: i64,
+            ) -> StoreResult<bool> {
+                let (status, table, error, progress) = match result {
+                    Ok(t) => ("ready", Some(t), None, 1.0),
+                    Err(e) => ("failed", None, Some(e), 0.0),
+                };
+                let r = sqlx::query(
+                    "UPDATE gearboxes SET status = $4, signature_table = $5, error = $6, \
+                     progress = $7, finished_at = $8, updated_at = $8, lease_until = 0 \
+                     WHERE id = $1 AND hash = $2 AND claimed_by = $3 AND status = 'running'",
+                )
+                .bind(id)
+                .bind(hash)
+                .bind(worker)
+                .bind(status)
+                .bind(table)
+                .bind(error)
+                .bind(progress)
+                .bind(now)
+                .execute(&self.pool)
+                .await?;
+                Ok(r.rows_affected() == 1)
+            }
+
+            async fn release_gearbox_job(
+                &self,
+                id: &str,
+                hash: &str,
+                worker: &str,
+            ) -> StoreResult<bool> {
+                let r = sqlx::query(
+                    "UPDATE gearboxes SET status = 'queued', claimed_by = NULL, lease_until = 0 \
+                     WHERE id = $1 AND hash = $2 AND claimed_by = $3 AND status = 'running'",
+                )
+                .bind(id)
+                .bind(hash)
+                .bind(worker)
+                .execute(&self.pool)
+                .await?;
+                Ok(r.rows_affected() == 1)
+            }
+
+            async fn put_machine(&self, m: &MachineConfig, now: i64) -> StoreResult<bool> {
+                let channels = m
+                    .channels
+                    .as_ref()
+                    .map(|c| serde_json::to_string(c).unwrap_or_default());
+                let mut tx = self.pool.begin().await?;
+                let ins = sqlx::query(
+                    "INSERT INTO machines (id, created_at, updated_at, gearbox_id, \
+                     input_shaft_hz, channels) VALUES ($1, $2, $2, $3, $4, $5) \
+                     ON CONFLICT (id) DO NOTHING",
+                )
+                .bind(&m.id)
+                .bind(now)
+                .bind(&m.gearbox_id)
+                .bind(m.input_shaft_hz)
+                .bind(&channels)
+                .execute(&mut *tx)
+                .await?;
+                let created = ins.rows_affected() == 1;
+                if !created {
+                    sqlx::query(
+                        "UPDATE machines SET gearbox_id = $2, input_shaft_hz = $3, \
+                         channels = $4, updated_at = $5 WHERE id = $1",
+                    )
+                    .bind(&m.id)
+                    .bind(&m.gearbox_id)
+                    .bind(m.input_shaft_hz)
+                    .bind(&channels)
+                    .bind(now)
+                    .execute(&mut *tx)
+                    .await?;
+                }
+                tx.commit().await?;
+                Ok(created)
+            }
+
+            async fn set_baseline(
+                &self,
+                machine_id: &str,
+                record_ids: &[String],
+                baseline: bool,
+                now: i64,
+            ) -> StoreResult<u64> {
+                let mut tx = self.pool.begin().await?;
+                let mut n = 0;
+                for id in record_ids {
+                    let r = sqlx::query(
+                        "UPDATE records SET baseline = $3, baseline_at = $4 \
+                         WHERE id = $1 AND machine_id = $2 AND baseline <> $3",
+                    )
+                    .bind(id)
+                    .bind(machine_id)
+                    .bind(baseline as i64)
+                    .bind(baseline.then_some(now))
+                    .execute(&mut *tx)
+                    .await?;
+                    n += r.rows_affected();
+                }
+                tx.commit().await?;
+                Ok(n)
+            }
+
+            async fn clear_baseline(&self, machine_id: &str) -> StoreResult<u64> {
+                let r = sqlx::query(
+                    "UPDATE records SET baseline = 0, baseline_at = NULL \
+                     WHERE machine_id = $1 AND baseline = 1",
+                )
+                .bind(machine_id)
+                .execute(&self.pool)
+                .await?;
+                Ok(r.rows_affected())
+            }
+
+            async fn baseline_records(&self, machine_id: &str) -> StoreResult<Vec<BaselineRecord>> {
+                let rows = sqlx::query(
+                    "SELECT id, received_at, baseline_at, features FROM records \
+                     WHERE machine_id = $1 AND baseline = 1 ORDER BY received_at, id",
+                )
+                .bind(machine_id)
+                .fetch_all(&self.pool)
+                .await?;
+                rows.iter()
+                    .map(|r| -> StoreResult<BaselineRecord> {
+                        Ok(BaselineRecord {
+                            id: r.try_get("id")?,
+                            received_at: r.try_get("received_at")?,
+                            baseline_at: r.try_get("baseline_at")?,
+                            features: r.try_get("features")?,
+                        })
+                    })
+                    .collect()
+            }
+
+            async fn machine_record_ids(
+                &self,
+                machine_id: &str,
+                record_ids: &[String],
+            ) -> StoreResult<Vec<String>> {
+                let mut out = Vec::new();
+                for id in record_ids {
+                    let r = sqlx::query("SELECT id FROM records WHERE id = $1 AND machine_id = $2")
+                        .bind(id)
+                        .bind(machine_id)
+                        .fetch_optional(&self.pool)
+                        .await?;
+                    if let Some(r) = r {
+                        out.push(r.try_get("id")?);
+                    }
+                }
+                Ok(out)
             }
         }
     };

@@ -9,6 +9,7 @@ mod browser;
 mod calibration;
 mod cli;
 mod faults;
+mod gearboxes;
 mod openapi;
 mod security;
 mod store;

@@ -3,7 +3,10 @@
 //! share a commit are each stored exactly once.
 
 use gearwear::store::queue::IngestQueue;
-use gearwear::store::{self, DiagnosisRow, IdemRow, Ingest, NewRecord, StoreError, new_id};
+use gearwear::store::{
+    self, DiagnosisRow, GearboxRow, IdemRow, Ingest, MachineConfig, NewRecord, PutOutcome,
+    StoreError, new_id,
+};
 
 use crate::both_stores;
 use crate::helpers::*;
@@ -12,7 +15,143 @@ both_stores!(
     a_failing_record_in_a_batch_fails_alone,
     concurrent_records_share_commits_and_are_each_stored_once,
     idempotency_answers_expire_records_stay,
+    a_table_job_is_claimed_once_and_taken_over_after_its_lease,
+    a_gearbox_put_again_is_unchanged_and_a_new_description_requeues,
+    baseline_marks_touch_only_the_machine_s_records,
 );
+
+fn gearbox(id: &str, hash: &str) -> GearboxRow {
+    GearboxRow {
+        id: id.into(),
+        name: id.into(),
+        source: "x".into(),
+        source_format: "toml".into(),
+        description: "{}".into(),
+        hash: hash.into(),
+        builtin: false,
+        status: "queued".into(),
+        progress: 0.0,
+        error: None,
+        claimed_by: None,
+        lease_until: 0,
+        attempts: 0,
+        created_at: 1,
+        updated_at: 1,
+        started_at: None,
+        finished_at: None,
+    }
+}
+
+/// Two replicas racing for one job: exactly one claims it; the other gets it only once the
+/// holder's lease ran out, and then the first can no longer report progress or finish it.
+async fn a_table_job_is_claimed_once_and_taken_over_after_its_lease(b: Backend) {
+    let Some(db) = TestDb::new(b).await else {
+        return;
+    };
+    let st = store::connect(&db.url).await.unwrap();
+    assert_eq!(st.put_gearbox(&gearbox("gb1", "h1")).await.unwrap(), PutOutcome::Created);
+    let (a, bb) = tokio::join!(
+        st.claim_gearbox_job(100, 1_000, "A"),
+        st.claim_gearbox_job(100, 1_000, "B")
+    );
+    let (a, bb) = (a.unwrap(), bb.unwrap());
+    assert!(a.is_some() != bb.is_some(), "exactly one replica claims the job");
+    let (holder, other) = if a.is_some() { ("A", "B") } else { ("B", "A") };
+    // Within the lease nobody else gets it; progress renews it.
+    assert!(st.claim_gearbox_job(900, 1_000, other).await.unwrap().is_none());
+    assert!(st.gearbox_progress("gb1", "h1", holder, 0.5, 2_000, 900).await.unwrap());
+    assert!(st.claim_gearbox_job(1_500, 1_000, other).await.unwrap().is_none());
+    let g = st.get_gearbox("gb1").await.unwrap().unwrap();
+    assert_eq!((g.status.as_str(), g.progress), ("running", 0.5));
+    // The holder dies: after the lease the other takes the job over.
+    let took = st.claim_gearbox_job(2_001, 1_000, other).await.unwrap().unwrap();
+    assert_eq!((took.claimed_by.as_deref(), took.attempts), (Some(other), 2));
+    assert!(!st.gearbox_progress("gb1", "h1", holder, 0.9, 5_000, 2_100).await.unwrap());
+    assert!(
+        !st.finish_gearbox_job("gb1", "h1", holder, Ok("late".into()), 2_200)
+            .await
+            .unwrap()
+    );
+    assert!(
+        st.finish_gearbox_job("gb1", "h1", other, Ok("{\"t\":1}".into()), 2_300)
+            .await
+            .unwrap()
+    );
+    let g = st.get_gearbox("gb1").await.unwrap().unwrap();
+    assert_eq!((g.status.as_str(), g.progress), ("ready", 1.0));
+    assert_eq!(st.gearbox_table("gb1", "h1").await.unwrap().as_deref(), Some("{\"t\":1}"));
+    assert!(st.gearbox_table("gb1", "other").await.unwrap().is_none());
+    // A ready job is not claimed again.
+    assert!(st.claim_gearbox_job(99_999, 1_000, "C").await.unwrap().is_none());
+    st.close().await;
+}
+
+async fn a_gearbox_put_again_is_unchanged_and_a_new_description_requeues(b: Backend) {
+    let Some(db) = TestDb::new(b).await else {
+        return;
+    };
+    let st = store::connect(&db.url).await.unwrap();
+    st.put_gearbox(&gearbox("gb2", "h1")).await.unwrap();
+    st.claim_gearbox_job(10, 1_000, "A").await.unwrap().unwrap();
+    st.finish_gearbox_job("gb2", "h1", "A", Err("boom".into()), 20)
+        .await
+        .unwrap();
+    assert_eq!(st.get_gearbox("gb2").await.unwrap().unwrap().status, "failed");
+    assert_eq!(st.put_gearbox(&gearbox("gb2", "h1")).await.unwrap(), PutOutcome::Unchanged);
+    assert_eq!(st.put_gearbox(&gearbox("gb2", "h2")).await.unwrap(), PutOutcome::Replaced);
+    let g = st.get_gearbox("gb2").await.unwrap().unwrap();
+    assert_eq!((g.status.as_str(), g.hash.as_str(), g.error), ("queued", "h2", None));
+    // The built-in one cannot be replaced, and its job is never claimed.
+    let mut bi = gearbox("builtin", "hb");
+    bi.builtin = true;
+    st.ensure_builtin_gearbox(&bi).await.unwrap();
+    st.ensure_builtin_gearbox(&bi).await.unwrap();
+    assert!(st.put_gearbox(&gearbox("builtin", "other")).await.is_err());
+    let g = st.get_gearbox("builtin").await.unwrap().unwrap();
+    assert_eq!((g.status.as_str(), g.builtin), ("ready", true));
+    let claimed = st.claim_gearbox_job(30, 1_000, "A").await.unwrap().unwrap();
+    assert_eq!(claimed.id, "gb2");
+    assert_eq!(st.list_gearboxes().await.unwrap().len(), 2);
+    st.close().await;
+}
+
+async fn baseline_marks_touch_only_the_machine_s_records(b: Backend) {
+    let Some(db) = TestDb::new(b).await else {
+        return;
+    };
+    let st = store::connect(&db.url).await.unwrap();
+    let mut r1 = ingest("m1", None, 1);
+    r1.record.baseline = true;
+    let r2 = ingest("m1", None, 2);
+    let r3 = ingest("m2", None, 3);
+    for r in [&r1, &r2, &r3] {
+        st.ingest(r).await.unwrap();
+    }
+    assert_eq!(st.baseline_records("m1").await.unwrap().len(), 1);
+    let ids = vec![r2.record.id.clone(), r3.record.id.clone()];
+    assert_eq!(st.machine_record_ids("m1", &ids).await.unwrap(), vec![r2.record.id.clone()]);
+    assert_eq!(st.set_baseline("m1", &ids, true, 10).await.unwrap(), 1);
+    let b1 = st.baseline_records("m1").await.unwrap();
+    assert_eq!(b1.len(), 2);
+    assert_eq!(b1[1].baseline_at, Some(10));
+    assert!(st.baseline_records("m2").await.unwrap().is_empty());
+    assert_eq!(st.clear_baseline("m1").await.unwrap(), 2);
+    assert!(st.baseline_records("m1").await.unwrap().is_empty());
+    // A machine configured before any record.
+    let cfg = MachineConfig {
+        id: "m3".into(),
+        gearbox_id: Some("gb".into()),
+        input_shaft_hz: Some(29.5),
+        channels: Some(vec!["a1".into(), "a2".into()]),
+    };
+    assert!(st.put_machine(&cfg, 5).await.unwrap());
+    assert!(!st.put_machine(&cfg, 6).await.unwrap());
+    let m = st.get_machine("m3").await.unwrap().unwrap();
+    assert_eq!(m.gearbox_id.as_deref(), Some("gb"));
+    assert_eq!(m.channels, Some(vec!["a1".to_string(), "a2".to_string()]));
+    assert_eq!((m.record_count, m.alert_level.as_str()), (0, "unknown"));
+    st.close().await;
+}
 
 async fn idempotency_answers_expire_records_stay(b: Backend) {
     let Some(db) = TestDb::new(b).await else {
@@ -50,6 +189,8 @@ fn ingest(machine: &str, idem: Option<&str>, t: i64) -> Ingest {
             sha256: "00".into(),
             features: "{}".into(),
             samples: Some(vec![0, 0, 128, 63]),
+            baseline: false,
+            channels: None,
         },
         diagnosis: DiagnosisRow {
             seq: 0,
@@ -64,6 +205,10 @@ fn ingest(machine: &str, idem: Option<&str>, t: i64) -> Ingest {
             motion_state: "period-1".into(),
             body: "{}".into(),
             spectrum: "null".into(),
+            has_wear: true,
+            novelty_score: None,
+            novelty_threshold: None,
+            channel: None,
         },
         idempotency: idem.map(|k| IdemRow {
             key_id: "key".into(),

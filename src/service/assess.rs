@@ -1,0 +1,256 @@
+//! What one record means for its machine: each channel diagnosed with the machine's gearbox
+//! (when its table is ready), scored against the machine's baseline (when it has one), and an
+//! alert level from both.
+//!
+//! # Alert levels
+//! * The **wear** level (`ok` / `warning` / `alarm` by the configured ea thresholds) counts only
+//!   when the model fits the record (no "poor fit": χ² per feature within the diagnosis's
+//!   limit) — a wear degree read off a model that does not explain the record is not evidence.
+//! * The **novelty** level: `ok` when the record is within the baseline's calibrated threshold,
+//!   `warning` above it, `alarm` above twice it. The condition indicators (kurtosis, crest
+//!   factor, the TSA metrics) enter through the novelty features, scaled by the machine's own
+//!   healthy records: fixed textbook limits (FM4 > 3 …) are not used, because healthy real
+//!   gearboxes exceed them (the SpectraQuest healthy records have FM4 ≈ 5.5).
+//! * The level is the higher of the two that count. When neither counts — the model does not
+//!   fit (or the table is not ready) and the machine has no baseline — the level is `unknown`:
+//!   not `ok`, because nothing vouches for the machine.
+//! * Several channels: each gets its level; the record's is the most severe (alarm > warning >
+//!   unknown > ok), ties broken by the larger novelty score over its threshold; that channel
+//!   is named as the one that decides.
+
+use serde::Serialize;
+use serde_json::{Value, json};
+
+use super::diagnoser::Output;
+use crate::configuration::Thresholds;
+use crate::novelty::{Novelty, RecordFeatures};
+
+/// A channel's (or a record's) alert.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Alert {
+    /// `ok`, `warning`, `alarm` or `unknown`.
+    pub level: &'static str,
+    /// `wear`, `novelty`, `wear+novelty` or `none`: what the level rests on.
+    pub basis: &'static str,
+    /// One sentence a person can act on.
+    pub reason: String,
+}
+
+/// Severity order for choosing the deciding channel.
+pub fn severity(level: &str) -> usize {
+    match level {
+        "alarm" => 3,
+        "warning" => 2,
+        "unknown" => 1,
+        _ => 0,
+    }
+}
+
+/// The alert of one channel.
+///
+/// `wear`: `(estimate, poor_fit, chi2_per_feature)` when the gearbox's table gave a wear
+/// degree; `novelty` when the machine has a baseline for this channel.
+pub fn alert(
+    wear: Option<(f64, bool, f64)>,
+    novelty: Option<&Novelty>,
+    th: &Thresholds,
+    table_note: Option<&str>,
+) -> Alert {
+    let wear_level = wear.filter(|w| !w.1).map(|w| th.level(w.0));
+    let nov_level = novelty.map(|n| {
+        if !n.anomalous {
+            "ok"
+        } else if n.score >= 2.0 * n.threshold {
+            "alarm"
+        } else {
+            "warning"
+        }
+    });
+    let fit_note = match (wear, table_note) {
+        (Some((_, true, chi2)), _) => format!(
+            "the model does not fit this record (χ² per feature {chi2:.1}), so its wear degree is not used"
+        ),
+        (None, Some(note)) => note.to_string(),
+        _ => String::new(),
+    };
+    match (wear_level, nov_level) {
+        (None, None) => Alert {
+            level: "unknown",
+            basis: "none",
+            reason: format!(
+                "{}{}and the machine has no baseline: add a baseline (POST at least 3 healthy \
+                 records with ?baseline=true) or describe the gearbox (PUT /v1/gearboxes/{{id}}, \
+                 then PUT /v1/machines/{{id}} with it)",
+                if fit_note.is_empty() {
+                    "no wear degree is available ".to_string()
+                } else {
+                    fit_note.clone()
+                },
+                if fit_note.is_empty() { "" } else { ", " }
+            ),
+        },
+        (Some(w), None) => Alert {
+            level: w,
+            basis: "wear",
+            reason: format!(
+                "wear degree {:.2} ({w}); no baseline yet for novelty",
+                wear.map(|w| w.0).unwrap_or(f64::NAN)
+            ),
+        },
+        (None, Some(n)) => {
+            let nv = novelty.expect("novelty level implies novelty");
+            Alert {
+                level: n,
+                basis: "novelty",
+                reason: format!(
+                    "novelty {:.2} against the machine's baseline (threshold {:.2}){}{}",
+                    nv.score,
+                    nv.threshold,
+                    if fit_note.is_empty() { "" } else { "; " },
+                    fit_note
+                ),
+            }
+        }
+        (Some(w), Some(n)) => {
+            let nv = novelty.expect("novelty level implies novelty");
+            let level = if severity(n) > severity(w) { n } else { w };
+            Alert {
+                level,
+                basis: "wear+novelty",
+                reason: format!(
+                    "wear degree {:.2} ({w}); novelty {:.2} against the machine's baseline \
+                     (threshold {:.2}, {n})",
+                    wear.map(|w| w.0).unwrap_or(f64::NAN),
+                    nv.score,
+                    nv.threshold
+                ),
+            }
+        }
+    }
+}
+
+/// One channel of a record, analysed.
+#[derive(Debug, Clone)]
+pub struct ChannelResult {
+    pub name: String,
+    /// The table's diagnosis, when the gearbox's table is ready.
+    pub output: Option<Output>,
+    pub features: RecordFeatures,
+    pub novelty: Option<Novelty>,
+    pub alert: Alert,
+}
+
+impl ChannelResult {
+    /// `(estimate, poor_fit, chi2_per_feature)` of the diagnosis.
+    pub fn wear(o: &Output) -> (f64, bool, f64) {
+        let fit = &o.diagnosis["fit"];
+        (
+            o.ea_estimate,
+            fit["inflated"].as_bool().unwrap_or(false),
+            fit["chi2_per_feature"].as_f64().unwrap_or(f64::NAN),
+        )
+    }
+
+    /// The summary of this channel in a record's answer.
+    pub fn summary(&self) -> Value {
+        json!({
+            "name": self.name,
+            "alert_level": self.alert.level,
+            "alert": self.alert,
+            "wear_degree": self.output.as_ref().map(|o| o.diagnosis["wear_degree"].clone()),
+            "fit": self.output.as_ref().map(|o| o.diagnosis["fit"].clone()),
+            "novelty": self.novelty,
+        })
+    }
+}
+
+/// Index of the channel that decides the record's alert.
+pub fn deciding(results: &[ChannelResult]) -> usize {
+    let ratio = |r: &ChannelResult| {
+        r.novelty
+            .as_ref()
+            .map(|n| n.score / n.threshold.max(f64::MIN_POSITIVE))
+            .unwrap_or(0.0)
+    };
+    let mut best = 0;
+    for (i, r) in results.iter().enumerate().skip(1) {
+        let b = &results[best];
+        let (s, sb) = (severity(r.alert.level), severity(b.alert.level));
+        if s > sb || (s == sb && ratio(r) > ratio(b)) {
+            best = i;
+        }
+    }
+    best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::novelty::FeatureZ;
+
+    const TH: Thresholds = Thresholds {
+        warning: 0.5,
+        alarm: 0.8,
+    };
+
+    fn nov(score: f64) -> Novelty {
+        Novelty {
+            score,
+            threshold: 3.0,
+            anomalous: score > 3.0,
+            baseline_records: 5,
+            top_features: vec![FeatureZ {
+                name: "x".into(),
+                z: score,
+            }],
+        }
+    }
+
+    #[test]
+    fn a_record_nothing_vouches_for_is_unknown_not_ok() {
+        let a = alert(Some((0.2, true, 40.0)), None, &TH, None);
+        assert_eq!(a.level, "unknown");
+        assert!(a.reason.contains("baseline"), "{}", a.reason);
+        let a = alert(None, None, &TH, Some("the table is not ready"));
+        assert_eq!(a.level, "unknown");
+        assert!(a.reason.starts_with("the table is not ready"), "{}", a.reason);
+    }
+
+    #[test]
+    fn a_poor_fit_defers_to_the_baseline() {
+        assert_eq!(alert(Some((0.9, true, 40.0)), Some(&nov(1.0)), &TH, None).level, "ok");
+        let a = alert(Some((0.1, true, 40.0)), Some(&nov(4.0)), &TH, None);
+        assert_eq!((a.level, a.basis), ("warning", "novelty"));
+        assert_eq!(alert(None, Some(&nov(6.5)), &TH, None).level, "alarm");
+    }
+
+    #[test]
+    fn a_good_fit_and_a_baseline_take_the_more_severe() {
+        assert_eq!(alert(Some((0.9, false, 1.0)), Some(&nov(1.0)), &TH, None).level, "alarm");
+        assert_eq!(alert(Some((0.1, false, 1.0)), Some(&nov(4.0)), &TH, None).level, "warning");
+        assert_eq!(alert(Some((0.6, false, 1.0)), None, &TH, None).level, "warning");
+        assert_eq!(alert(Some((0.1, false, 1.0)), None, &TH, None).level, "ok");
+    }
+
+    #[test]
+    fn the_most_severe_channel_decides() {
+        let ch = |name: &str, level: &'static str, score: f64| ChannelResult {
+            name: name.into(),
+            output: None,
+            features: RecordFeatures {
+                values: Default::default(),
+                indicators: Value::Null,
+            },
+            novelty: Some(nov(score)),
+            alert: Alert {
+                level,
+                basis: "novelty",
+                reason: String::new(),
+            },
+        };
+        let v = vec![ch("a1", "ok", 1.0), ch("a2", "warning", 3.5), ch("a3", "warning", 5.0)];
+        assert_eq!(deciding(&v), 2);
+        let v = vec![ch("a1", "unknown", 0.0), ch("a2", "ok", 2.0)];
+        assert_eq!(deciding(&v), 0);
+    }
+}

@@ -1,0 +1,435 @@
+//! A machine's configuration and its baseline.
+//!
+//! * `PUT /v1/machines/{id}` (admin): `{"gearbox": "<id>", "input_shaft_hz"?: number,
+//!   "channels"?: [names]}` — which gearbox the machine's records are diagnosed with (default
+//!   the built-in paper rig), its nominal input-shaft rate (a hint for finding the mesh line;
+//!   the rate itself is measured in each record) and the channels to diagnose.
+//! * `GET/POST/DELETE /v1/machines/{id}/baseline`: the records marked healthy. A record is
+//!   marked when posted (`…/records?baseline=true`) or afterwards (POST `{"record_ids": […]}`,
+//!   admin); DELETE clears the baseline, `DELETE …/baseline/{record_id}` unmarks one.
+//!
+//! [`context`] gives a record's diagnosis what it needs of its machine; [`baselines`] fits the
+//! machine's baseline per channel from the stored features of its baseline records (only those
+//! computed with the machine's current gearbox description).
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use axum::Json;
+use axum::extract::{Path, State};
+use axum::http::{HeaderMap, StatusCode};
+use axum::response::{IntoResponse, Response};
+use serde::Deserialize;
+use serde_json::{Value, json};
+
+use super::AppState;
+use super::auth::Caller;
+use super::diagnoser::Diagnoser;
+use super::error::{ApiError, ApiResult};
+use super::gearboxes::{BUILTIN_ID, check_gearbox_id};
+use super::read::json_with_etag;
+use super::records::{check_machine_id, read_body};
+use super::time::rfc3339;
+use crate::gearbox::Gearbox;
+use crate::keys::Scope;
+use crate::novelty::{MIN_BASELINE_RECORDS, MachineBaseline, RecordFeatures};
+use crate::store::{GearboxRow, MachineConfig, MachineRow, now_ms};
+
+/// Largest configuration or baseline request body.
+const SMALL_BODY: usize = 64 * 1024;
+
+/// What a record's diagnosis needs of its machine.
+pub struct MachineContext {
+    pub machine: Option<MachineRow>,
+    pub gearbox_row: GearboxRow,
+    pub gearbox: Arc<Gearbox>,
+    /// The diagnoser of the gearbox's table; `None` while the table is not ready.
+    pub diagnoser: Option<Arc<dyn Diagnoser>>,
+}
+
+impl MachineContext {
+    /// The note a diagnosis carries while the gearbox's table is not ready.
+    pub fn table_note(&self) -> Option<String> {
+        if self.diagnoser.is_some() {
+            return None;
+        }
+        let g = &self.gearbox_row;
+        Some(match g.status.as_str() {
+            "failed" => format!(
+                "the signature table of gearbox `{}` failed ({}): no wear degree; this diagnosis \
+                 uses the machine's baseline and indicators only — PUT a corrected description",
+                g.id,
+                g.error.as_deref().unwrap_or("no reason stored")
+            ),
+            s => format!(
+                "the signature table of gearbox `{}` is not ready ({s}, {:.0} %): no wear degree \
+                 yet; this diagnosis uses the machine's baseline and indicators only",
+                g.id,
+                100.0 * g.progress
+            ),
+        })
+    }
+
+    /// The `gearbox` object of a diagnosis.
+    pub fn json(&self) -> Value {
+        json!({
+            "id": self.gearbox_row.id,
+            "name": self.gearbox_row.name,
+            "hash": self.gearbox_row.hash,
+            "table_status": self.gearbox_row.status,
+            "table_progress": self.gearbox_row.progress,
+        })
+    }
+
+    pub fn input_shaft_hz(&self) -> Option<f64> {
+        self.machine.as_ref().and_then(|m| m.input_shaft_hz)
+    }
+}
+
+/// The machine (if it exists), its gearbox and that gearbox's diagnoser.
+pub async fn context(app: &AppState, machine_id: &str) -> ApiResult<MachineContext> {
+    let machine = app.store.get_machine(machine_id).await?;
+    let gid = machine
+        .as_ref()
+        .and_then(|m| m.gearbox_id.clone())
+        .unwrap_or_else(|| BUILTIN_ID.to_string());
+    let row = match app.store.get_gearbox(&gid).await? {
+        Some(r) => r,
+        None if gid == BUILTIN_ID => {
+            super::gearboxes::ensure_builtin(app).await?;
+            app.store
+                .get_gearbox(BUILTIN_ID)
+                .await?
+                .ok_or_else(|| ApiError::internal("the built-in gearbox is missing"))?
+        }
+        None => {
+            return Err(ApiError::internal(format!(
+                "machine `{machine_id}` names gearbox `{gid}`, which is not stored"
+            )));
+        }
+    };
+    let gearbox = if row.builtin {
+        app.builtin_gearbox.clone()
+    } else {
+        app.tables
+            .gearbox(&row)
+            .map_err(|e| ApiError::internal(format!("gearbox `{gid}`: {e}")))?
+    };
+    let diagnoser = app.tables.diagnoser(app, &row).await?;
+    Ok(MachineContext {
+        machine,
+        gearbox_row: row,
+        gearbox,
+        diagnoser,
+    })
+}
+
+/// The machine's baseline per channel, fitted from the stored features of its baseline
+/// records computed with gearbox description `hash`; `(fitted, records per channel)`.
+pub async fn baselines(
+    app: &AppState,
+    machine_id: &str,
+    hash: &str,
+) -> ApiResult<(BTreeMap<String, MachineBaseline>, BTreeMap<String, usize>)> {
+    let rows = app.store.baseline_records(machine_id).await?;
+    let mut per: BTreeMap<String, Vec<RecordFeatures>> = BTreeMap::new();
+    for r in rows {
+        let Ok(f) = serde_json::from_str::<Value>(&r.features) else {
+            continue;
+        };
+        if f["gearbox_hash"].as_str() != Some(hash) {
+            continue;
+        }
+        if let Some(chs) = f["channels"].as_object() {
+            for (name, c) in chs {
+                if let Ok(rf) =
+                    serde_json::from_value::<RecordFeatures>(c["novelty_features"].clone())
+                {
+                    per.entry(name.clone()).or_default().push(rf);
+                }
+            }
+        }
+    }
+    let counts = per.iter().map(|(k, v)| (k.clone(), v.len())).collect();
+    let fitted = tokio::task::spawn_blocking(move || {
+        per.into_iter()
+            .filter(|(_, v)| v.len() >= MIN_BASELINE_RECORDS)
+            .filter_map(|(k, v)| MachineBaseline::fit(&v).ok().map(|b| (k, b)))
+            .collect::<BTreeMap<_, _>>()
+    })
+    .await
+    .map_err(|e| ApiError::internal(format!("fitting the baseline failed: {e}")))?;
+    Ok((fitted, counts))
+}
+
+/// `PUT /v1/machines/{id}` body.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MachineBody {
+    pub gearbox: Option<String>,
+    #[serde(default)]
+    pub input_shaft_hz: Option<f64>,
+    #[serde(default)]
+    pub channels: Option<Vec<String>>,
+}
+
+/// The configuration part of a machine's JSON.
+pub fn config_json(m: &MachineRow) -> Value {
+    json!({
+        "gearbox": m.gearbox_id.clone().unwrap_or_else(|| BUILTIN_ID.to_string()),
+        "input_shaft_hz": m.input_shaft_hz,
+        "channels": m.channels,
+    })
+}
+
+/// `PUT /v1/machines/{id}`.
+pub async fn put(
+    State(app): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+    body: axum::body::Body,
+) -> ApiResult<Response> {
+    if let Err(e) = caller.require(&app, Scope::Admin) {
+        let _ = read_body(&headers, body, SMALL_BODY).await;
+        return Err(e);
+    }
+    check_machine_id(&id)?;
+    let body = read_body(&headers, body, SMALL_BODY).await?;
+    let b: MachineBody = serde_json::from_slice(&body).map_err(|e| {
+        ApiError::bad_request(
+            "invalid-machine",
+            "Invalid machine configuration",
+            format!(
+                "{e}; expected {{\"gearbox\": \"<gearbox id>\", \"input_shaft_hz\"?: number, \
+                 \"channels\"?: [names]}}"
+            ),
+        )
+    })?;
+    let gearbox = b.gearbox.unwrap_or_else(|| BUILTIN_ID.to_string());
+    check_gearbox_id(&gearbox)?;
+    if app.store.get_gearbox(&gearbox).await?.is_none() {
+        if gearbox == BUILTIN_ID {
+            super::gearboxes::ensure_builtin(&app).await?;
+        } else {
+            return Err(ApiError::unprocessable(
+                "unknown-gearbox",
+                "Unknown gearbox",
+                format!("no gearbox `{gearbox}`: PUT its description to /v1/gearboxes/{gearbox} first"),
+            )
+            .with("gearbox_id", gearbox.as_str()));
+        }
+    }
+    if let Some(hz) = b.input_shaft_hz
+        && !(hz.is_finite() && hz > 0.0 && hz <= 1000.0)
+    {
+        return Err(ApiError::unprocessable(
+            "invalid-machine",
+            "Invalid machine configuration",
+            format!("`input_shaft_hz` must be a rate in Hz above 0 and at most 1000, got {hz}"),
+        ));
+    }
+    if let Some(ch) = &b.channels {
+        let bad = ch.is_empty()
+            || ch.len() > 64
+            || ch.iter().any(|c| c.is_empty() || c.len() > 64)
+            || (1..ch.len()).any(|i| ch[..i].contains(&ch[i]));
+        if bad {
+            return Err(ApiError::unprocessable(
+                "invalid-machine",
+                "Invalid machine configuration",
+                "`channels` is a list of 1 to 64 distinct names of 1 to 64 characters",
+            ));
+        }
+    }
+    let created = app
+        .store
+        .put_machine(
+            &MachineConfig {
+                id: id.clone(),
+                gearbox_id: (gearbox != BUILTIN_ID).then_some(gearbox),
+                input_shaft_hz: b.input_shaft_hz,
+                channels: b.channels,
+            },
+            now_ms(),
+        )
+        .await?;
+    let m = app
+        .store
+        .get_machine(&id)
+        .await?
+        .ok_or_else(|| ApiError::internal("the stored machine vanished"))?;
+    let mut body = config_json(&m);
+    body["id"] = id.into();
+    let status = if created {
+        StatusCode::CREATED
+    } else {
+        StatusCode::OK
+    };
+    Ok((status, Json(body)).into_response())
+}
+
+fn unknown_machine(id: &str) -> ApiError {
+    ApiError::not_found(
+        "unknown-machine",
+        format!("no machine `{id}`: it has no record and no configuration yet"),
+    )
+    .with("machine_id", id)
+}
+
+/// The `baseline` object of a machine: its records and, per channel, how many and whether a
+/// baseline is fitted.
+pub async fn baseline_json(app: &AppState, m: &MachineRow) -> ApiResult<Value> {
+    let rows = app.store.baseline_records(&m.id).await?;
+    let ctx_hash = match &m.gearbox_id {
+        Some(g) => app.store.get_gearbox(g).await?.map(|r| r.hash),
+        None => app.store.get_gearbox(BUILTIN_ID).await?.map(|r| r.hash),
+    };
+    let (fitted, counts) = match &ctx_hash {
+        Some(h) => baselines(app, &m.id, h).await?,
+        None => Default::default(),
+    };
+    let records: Vec<Value> = rows
+        .iter()
+        .map(|r| {
+            let f: Value = serde_json::from_str(&r.features).unwrap_or(Value::Null);
+            json!({
+                "record_id": r.id,
+                "received_at": rfc3339(r.received_at),
+                "baseline_at": r.baseline_at.map(rfc3339),
+                "channels": f["channels"].as_object().map(|c| c.keys().cloned().collect::<Vec<_>>()),
+                "current_gearbox": ctx_hash.is_some() && f["gearbox_hash"].as_str() == ctx_hash.as_deref(),
+            })
+        })
+        .collect();
+    let channels: BTreeMap<String, Value> = counts
+        .iter()
+        .map(|(k, n)| {
+            let b = fitted.get(k);
+            (
+                k.clone(),
+                json!({"records": n, "ready": b.is_some(), "threshold": b.map(|b| b.threshold)}),
+            )
+        })
+        .collect();
+    Ok(json!({
+        "records": records,
+        "count": rows.len(),
+        "min_records": MIN_BASELINE_RECORDS,
+        "ready": !fitted.is_empty(),
+        "first_at": rows.first().map(|r| rfc3339(r.baseline_at.unwrap_or(r.received_at))),
+        "last_at": rows.last().map(|r| rfc3339(r.baseline_at.unwrap_or(r.received_at))),
+        "channels": channels,
+    }))
+}
+
+async fn machine_or_404(app: &AppState, id: &str) -> ApiResult<MachineRow> {
+    check_machine_id(id)?;
+    app.store
+        .get_machine(id)
+        .await?
+        .ok_or_else(|| unknown_machine(id))
+}
+
+/// `GET /v1/machines/{id}/baseline`.
+pub async fn get_baseline(
+    State(app): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+) -> ApiResult<Response> {
+    caller.require_read(&app)?;
+    let m = machine_or_404(&app, &id).await?;
+    let mut body = baseline_json(&app, &m).await?;
+    body["machine_id"] = id.into();
+    Ok(json_with_etag(&headers, &body))
+}
+
+/// `POST /v1/machines/{id}/baseline` body.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MarkBody {
+    pub record_ids: Vec<String>,
+}
+
+/// `POST /v1/machines/{id}/baseline`: mark stored records as healthy.
+pub async fn post_baseline(
+    State(app): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+    body: axum::body::Body,
+) -> ApiResult<Response> {
+    if let Err(e) = caller.require(&app, Scope::Admin) {
+        let _ = read_body(&headers, body, SMALL_BODY).await;
+        return Err(e);
+    }
+    let m = machine_or_404(&app, &id).await?;
+    let body = read_body(&headers, body, SMALL_BODY).await?;
+    let b: MarkBody = serde_json::from_slice(&body).map_err(|e| {
+        ApiError::bad_request(
+            "invalid-baseline",
+            "Invalid baseline request",
+            format!("{e}; expected {{\"record_ids\": [\"<record id>\", …]}}"),
+        )
+    })?;
+    if b.record_ids.is_empty() || b.record_ids.len() > 1000 {
+        return Err(ApiError::unprocessable(
+            "invalid-baseline",
+            "Invalid baseline request",
+            "`record_ids` holds 1 to 1000 record ids",
+        ));
+    }
+    let known = app.store.machine_record_ids(&id, &b.record_ids).await?;
+    let missing: Vec<&String> = b.record_ids.iter().filter(|r| !known.contains(r)).collect();
+    if !missing.is_empty() {
+        return Err(ApiError::unprocessable(
+            "unknown-record",
+            "Unknown record",
+            format!(
+                "machine `{id}` has no record {}; record ids are the `record_id` of a POST …/records answer",
+                missing.iter().map(|s| format!("`{s}`")).collect::<Vec<_>>().join(", ")
+            ),
+        )
+        .with("record_ids", json!(missing)));
+    }
+    app.store
+        .set_baseline(&id, &b.record_ids, true, now_ms())
+        .await?;
+    let mut body = baseline_json(&app, &m).await?;
+    body["machine_id"] = id.into();
+    Ok((StatusCode::OK, Json(body)).into_response())
+}
+
+/// `DELETE /v1/machines/{id}/baseline`: forget the baseline (the records stay).
+pub async fn delete_baseline(
+    State(app): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+) -> ApiResult<Response> {
+    caller.require(&app, Scope::Admin)?;
+    machine_or_404(&app, &id).await?;
+    app.store.clear_baseline(&id).await?;
+    Ok(StatusCode::NO_CONTENT.into_response())
+}
+
+/// `DELETE /v1/machines/{id}/baseline/{record_id}`: unmark one record.
+pub async fn delete_baseline_record(
+    State(app): State<AppState>,
+    caller: Caller,
+    Path((id, record_id)): Path<(String, String)>,
+) -> ApiResult<Response> {
+    caller.require(&app, Scope::Admin)?;
+    machine_or_404(&app, &id).await?;
+    let n = app
+        .store
+        .set_baseline(&id, std::slice::from_ref(&record_id), false, now_ms())
+        .await?;
+    if n == 0 {
+        return Err(ApiError::not_found(
+            "unknown-record",
+            format!("machine `{id}` has no baseline record `{record_id}`"),
+        ));
+    }
+    Ok(StatusCode::NO_CONTENT.into_response())
+}

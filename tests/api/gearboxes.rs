@@ -1,0 +1,314 @@
+//! Gearboxes, machines and baselines through the API (issue 14), on both stores: a described
+//! gearbox's table precomputed in the background (and resumed after a restart), a machine
+//! pointed at it, a record diagnosed before and after the table is ready, a baseline that makes
+//! a machine the model does not fit judgeable, and the `unknown` state when nothing vouches.
+
+use std::time::{Duration, Instant};
+
+use serde_json::{Value, json};
+
+use gearwear::gearbox::Gearbox;
+use gearwear::signature::SensorQuantity;
+use gearwear::signature::precompute::{MeasurementSpec, simulate_measurement};
+
+use crate::both_stores;
+use crate::helpers::*;
+
+both_stores!(
+    a_described_gearbox_is_tabled_in_the_background_and_diagnoses_its_machine,
+    a_baseline_makes_a_machine_the_model_does_not_fit_judgeable,
+    a_table_job_interrupted_by_a_restart_resumes,
+);
+
+const SPUR: &str = include_str!("../../configs/gearboxes/spur-pair.toml");
+const TWO_STAGE: &str = include_str!("../../configs/gearboxes/two-stage-parallel.toml");
+
+async fn put_gearbox(app: &TestApp, id: &str, key: &str, text: &str) -> (u16, Value) {
+    let (s, _, body) = checked(
+        app.client
+            .put(app.url(&format!("/v1/gearboxes/{id}")))
+            .bearer_auth(key)
+            .header("content-type", "application/toml")
+            .body(text.to_string()),
+        "PUT",
+        "/v1/gearboxes/{gearbox_id}",
+    )
+    .await;
+    (s, json(&body))
+}
+
+async fn put_machine(app: &TestApp, id: &str, body: Value) -> (u16, Value) {
+    let (s, _, b) = checked(
+        app.client
+            .put(app.url(&format!("/v1/machines/{id}")))
+            .bearer_auth(&app.admin_key)
+            .json(&body),
+        "PUT",
+        "/v1/machines/{machine_id}",
+    )
+    .await;
+    (s, json(&b))
+}
+
+async fn get_json(app: &TestApp, path: &str, template: &str) -> Value {
+    let (s, _, b) = checked(
+        app.client.get(app.url(path)).bearer_auth(&app.read_key),
+        "GET",
+        template,
+    )
+    .await;
+    assert_eq!(s, 200, "{}", String::from_utf8_lossy(&b));
+    json(&b)
+}
+
+async fn post_record(app: &TestApp, machine: &str, query: &str, body: &Value) -> (u16, Value) {
+    let (s, _, b) = checked(
+        app.client
+            .post(app.url(&format!("/v1/machines/{machine}/records{query}")))
+            .bearer_auth(&app.ingest_key)
+            .json(body),
+        "POST",
+        "/v1/machines/{machine_id}/records",
+    )
+    .await;
+    (s, json(&b))
+}
+
+/// Poll a gearbox until its table is ready (or fail on `failed` / timeout).
+async fn wait_ready(app: &TestApp, id: &str, limit: Duration) -> Value {
+    let t0 = Instant::now();
+    loop {
+        let g = get_json(app, &format!("/v1/gearboxes/{id}"), "/v1/gearboxes/{gearbox_id}").await;
+        match g["status"].as_str().unwrap() {
+            "ready" => return g,
+            "failed" => panic!("table job failed: {g}"),
+            _ => {}
+        }
+        assert!(t0.elapsed() < limit, "table not ready after {limit:?}: {g}");
+        tokio::time::sleep(Duration::from_millis(250)).await;
+    }
+}
+
+/// A simulated 1 s record of a described gearbox at its nominal input rate.
+fn described_record(text: &str, ea: f64, seed: u64) -> Value {
+    let gb = Gearbox::parse(text, "test").unwrap();
+    let hz = gb.description.nominal_input_hz.unwrap();
+    let omega1 = gb.f1_hz(hz) / gb.reference_frequency_hz();
+    let rec = simulate_measurement(
+        &gb,
+        &MeasurementSpec {
+            ea,
+            omega1,
+            sample_rate: 25_600.0,
+            duration: 1.0,
+            gain: 3.0,
+            snr_db: Some(25.0),
+            seed,
+            sensor: SensorQuantity::Accel,
+            planetary: None,
+        },
+    )
+    .unwrap();
+    json!({"sample_rate_hz": rec.sample_rate, "samples": rec.samples})
+}
+
+async fn a_described_gearbox_is_tabled_in_the_background_and_diagnoses_its_machine(b: Backend) {
+    let Some(app) = spawn_app(b, |_| {}).await else {
+        return;
+    };
+    // The built-in rig is there from the start.
+    let list = get_json(&app, "/v1/gearboxes", "/v1/gearboxes").await;
+    let rig = &list["gearboxes"][0];
+    assert_eq!((rig["id"].as_str(), rig["status"].as_str()), (Some("wang2019"), Some("ready")));
+    assert_eq!(rig["builtin"], true);
+
+    // A description's own mistake comes back as a 422 naming it; only admin may PUT.
+    let bad = SPUR.replace("teeth = 67", "teeth = 0");
+    let (s, p) = put_gearbox(&app, "spur", &app.admin_key, &bad).await;
+    assert_eq!(s, 422, "{p}");
+    assert!(p["detail"].as_str().unwrap().contains("teeth"), "{p}");
+    let (s, _) = put_gearbox(&app, "spur", &app.ingest_key, SPUR).await;
+    assert_eq!(s, 403);
+    let (s, _) = put_gearbox(&app, "wang2019", &app.admin_key, SPUR).await;
+    assert_eq!(s, 409);
+
+    let (s, g) = put_gearbox(&app, "spur", &app.admin_key, SPUR).await;
+    assert_eq!(s, 201, "{g}");
+    assert!(matches!(g["status"].as_str(), Some("queued" | "running")), "{g}");
+    assert_eq!(g["name"], "spur-pair");
+    assert!(g["assumed"].as_array().is_some_and(|a| !a.is_empty()), "{g}");
+    // 25 teeth at 25 Hz: the mesh at 625 Hz.
+    let meshes = &g["kinematics"]["rates"]["meshes"];
+    assert!((meshes[0]["hz"].as_f64().unwrap() - 625.0).abs() < 1e-9, "{g}");
+    let (s, again) = put_gearbox(&app, "spur", &app.admin_key, SPUR).await;
+    assert_eq!((s, &again["hash"]), (200, &g["hash"]));
+
+    // Machines point at stored gearboxes only.
+    let (s, p) = put_machine(&app, "m-x", json!({"gearbox": "nope"})).await;
+    assert_eq!((s, p["type"].as_str()), (422, Some("urn:gearwear:problem:unknown-gearbox")));
+    let (s, m) = put_machine(&app, "m-spur", json!({"gearbox": "spur", "input_shaft_hz": 25.0})).await;
+    assert_eq!((s, m["gearbox"].as_str()), (201, Some("spur")), "{m}");
+    let (s, _) = put_machine(&app, "m-spur", json!({"gearbox": "spur", "input_shaft_hz": 25.0})).await;
+    assert_eq!(s, 200);
+
+    // A record before the table is ready is stored and judged without a wear degree; with no
+    // baseline either, nothing vouches for the machine: `unknown`, with what to do.
+    let early = app.store.get_gearbox("spur").await.unwrap().unwrap();
+    if early.status != "ready" {
+        let (s, d) = post_record(&app, "m-spur", "", &described_record(SPUR, 0.3, 1)).await;
+        assert_eq!(s, 201, "{d}");
+        if d["gearbox"]["table_status"] != "ready" {
+            assert!(d["wear_degree"].is_null(), "{d}");
+            assert_eq!(d["alert_level"], "unknown", "{d}");
+            assert!(d["alert"]["reason"].as_str().unwrap().contains("baseline"), "{d}");
+            assert!(
+                d["warnings"].as_array().unwrap().iter().any(|w| w.as_str().unwrap().contains("not ready")),
+                "{d}"
+            );
+        }
+    }
+
+    let g = wait_ready(&app, "spur", Duration::from_secs(600)).await;
+    assert_eq!(g["progress"], 1.0);
+    let (s, d) = post_record(&app, "m-spur", "", &described_record(SPUR, 0.3, 2)).await;
+    assert_eq!(s, 201, "{d}");
+    assert_eq!(d["gearbox"]["id"], "spur");
+    assert_eq!(d["gearbox"]["hash"], g["hash"]);
+    let w = d["wear_degree"]["estimate"].as_f64().expect("a wear degree once ready");
+    assert!((0.0..=1.2).contains(&w), "{d}");
+    assert!((d["f1_hz"].as_f64().unwrap() / 625.0 - 1.0).abs() < 0.02, "{d}");
+    let m = get_json(&app, "/v1/machines/m-spur", "/v1/machines/{machine_id}").await;
+    assert_eq!(m["gearbox"]["id"], "spur");
+    assert_eq!(m["configuration"]["input_shaft_hz"], 25.0);
+}
+
+/// Records the paper rig's model does not explain: a 1 kHz tone with strong lines where the
+/// rig's model has weak ones (f1/2, f1 + f2 of the rig at f1 = 1 kHz), with noise.
+fn foreign_record(seed: u64, impulses: bool) -> Value {
+    let fs = 25_600.0;
+    let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(7);
+    let mut noise = || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    let x: Vec<f64> = (0..25_600)
+        .map(|i| {
+            let t = i as f64 / fs;
+            let tau = std::f64::consts::TAU;
+            let mut v = (tau * 1000.0 * t).sin()
+                + 0.5 * (tau * 500.0 * t).sin()
+                + 0.8 * (tau * 1360.0 * t).sin()
+                + 0.2 * (tau * 3100.0 * t).sin()
+                + 0.3 * noise();
+            // A broken tooth: a short ringing burst once per revolution (31.25 Hz).
+            if impulses {
+                let ph = (t * 31.25).fract() / 31.25;
+                v += 6.0 * (-ph * 2000.0).exp() * (tau * 4500.0 * ph).sin();
+            }
+            v
+        })
+        .collect();
+    json!({"sample_rate_hz": fs, "samples": x})
+}
+
+async fn a_baseline_makes_a_machine_the_model_does_not_fit_judgeable(b: Backend) {
+    let Some(app) = spawn_app(b, |_| {}).await else {
+        return;
+    };
+    // No description, no baseline, a record the rig's model does not fit: not `ok`.
+    let (s, d) = post_record(&app, "real-1", "", &foreign_record(1, false)).await;
+    assert_eq!(s, 201, "{d}");
+    assert_eq!(d["fit"]["inflated"], true, "the test record should not fit the rig: {d}");
+    assert_eq!(d["alert_level"], "unknown", "{d}");
+    assert!(d["novelty"].is_null());
+    let first_record = d["record_id"].as_str().unwrap().to_string();
+
+    // Three healthy records as the baseline; the third one's answer still has no novelty
+    // (it was scored before it joined), later ones have.
+    for seed in 2..=4 {
+        let (s, d) = post_record(&app, "real-1", "?baseline=true", &foreign_record(seed, false)).await;
+        assert_eq!(s, 201, "{d}");
+        assert_eq!(d["baseline"]["this_record"], true);
+    }
+    let (s, d) = post_record(&app, "real-1", "", &foreign_record(5, false)).await;
+    assert_eq!(s, 201, "{d}");
+    let n = &d["novelty"];
+    assert_eq!(n["baseline_records"], 3, "{d}");
+    assert_eq!(n["anomalous"], false, "a healthy record flagged: {d}");
+    assert_eq!((d["alert_level"].as_str(), d["alert"]["basis"].as_str()), (Some("ok"), Some("novelty")), "{d}");
+
+    let (s, d) = post_record(&app, "real-1", "", &foreign_record(6, true)).await;
+    assert_eq!(s, 201, "{d}");
+    assert_eq!(d["novelty"]["anomalous"], true, "a broken tooth not flagged: {d}");
+    assert!(matches!(d["alert_level"].as_str(), Some("warning" | "alarm")), "{d}");
+    assert!(!d["novelty"]["top_features"].as_array().unwrap().is_empty());
+
+    // The machine view: its baseline, novelty over time.
+    let m = get_json(&app, "/v1/machines/real-1", "/v1/machines/{machine_id}").await;
+    assert_eq!(m["baseline"]["count"], 3);
+    assert_eq!(m["baseline"]["ready"], true);
+    let trend = m["trend"].as_array().unwrap();
+    assert_eq!(trend.len(), 6);
+    assert!(trend[0]["novelty"].is_null() && trend[5]["novelty"].as_f64().unwrap() > 0.0);
+    assert_eq!(m["alert_level"], d["alert_level"]);
+
+    // Marking afterwards (admin), unmarking, clearing.
+    let mark = |ids: Value, key: String| {
+        app.client
+            .post(app.url("/v1/machines/real-1/baseline"))
+            .bearer_auth(key)
+            .json(&json!({"record_ids": ids}))
+    };
+    let (s, _, _) = checked(mark(json!([first_record]), app.ingest_key.clone()), "POST", "/v1/machines/{machine_id}/baseline").await;
+    assert_eq!(s, 403);
+    let (s, _, body) = checked(mark(json!(["no-such-record"]), app.admin_key.clone()), "POST", "/v1/machines/{machine_id}/baseline").await;
+    assert_eq!(s, 422, "{}", String::from_utf8_lossy(&body));
+    let (s, _, body) = checked(mark(json!([first_record]), app.admin_key.clone()), "POST", "/v1/machines/{machine_id}/baseline").await;
+    assert_eq!(s, 200, "{}", String::from_utf8_lossy(&body));
+    assert_eq!(json(&body)["count"], 4);
+    let (s, _, _) = checked(
+        app.client
+            .delete(app.url(&format!("/v1/machines/real-1/baseline/{first_record}")))
+            .bearer_auth(&app.admin_key),
+        "DELETE",
+        "/v1/machines/{machine_id}/baseline/{record_id}",
+    )
+    .await;
+    assert_eq!(s, 204);
+    let bl = get_json(&app, "/v1/machines/real-1/baseline", "/v1/machines/{machine_id}/baseline").await;
+    assert_eq!(bl["count"], 3);
+    let (s, _, _) = checked(
+        app.client.delete(app.url("/v1/machines/real-1/baseline")).bearer_auth(&app.admin_key),
+        "DELETE",
+        "/v1/machines/{machine_id}/baseline",
+    )
+    .await;
+    assert_eq!(s, 204);
+    let (s, d) = post_record(&app, "real-1", "", &foreign_record(7, false)).await;
+    assert_eq!((s, d["alert_level"].as_str()), (201, Some("unknown")), "{d}");
+}
+
+async fn a_table_job_interrupted_by_a_restart_resumes(b: Backend) {
+    let Some(mut app) = spawn_app(b, |_| {}).await else {
+        return;
+    };
+    let id = format!("two-stage-{}", gearwear::store::new_id());
+    let (s, _) = put_gearbox(&app, &id, &app.admin_key.clone(), TWO_STAGE).await;
+    assert_eq!(s, 201);
+    // Wait until a replica runs it, then stop that replica mid-job and start another.
+    let t0 = Instant::now();
+    loop {
+        let g = app.store.get_gearbox(&id).await.unwrap().unwrap();
+        if g.status == "running" {
+            break;
+        }
+        assert!(g.status == "queued", "{g:?}");
+        assert!(t0.elapsed() < Duration::from_secs(60), "never started");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    app.restart(|_| {}).await;
+    let g = wait_ready(&app, &id, Duration::from_secs(600)).await;
+    assert!(g["attempts"].as_i64().unwrap() >= 2, "{g}");
+}
