@@ -114,8 +114,8 @@ impl TryFrom<JsonRecordBody> for JsonRecord {
             }
             (None, None) => {
                 return Err(
-                    "the record has neither `samples` (an array of numbers, one \
-                     channel) nor `channels` (an object of channel name: array of numbers)"
+                    "missing field `samples` (an array of numbers, one channel) or \
+                     `channels` (an object of channel name: array of numbers)"
                         .into(),
                 );
             }
@@ -1182,8 +1182,7 @@ mod tests {
             ),
             (
                 r#"{"sample_rate_hz": 1}"#,
-                "the record has neither `samples` (an array of numbers, one channel) nor \
-                 `channels`",
+                "missing field `samples` (an array of numbers, one channel) or `channels`",
             ),
             (
                 r#"{"sample_rate_hz": 1, "channels": {}}"#,
