@@ -7,7 +7,8 @@ The signal is a short gear-mesh-like vibration (mesh line, a harmonic, shaft sid
 seeded noise): 256 samples at 25.6 kHz (10 ms), so each seed stays at a few KB. The WAV
 layouts follow `gearwear::record::encode_wav` (16-bit PCM, 32-bit float) plus the other
 encodings `parse_wav` accepts (8/24/32-bit PCM, 64-bit float, WAVE_FORMAT_EXTENSIBLE,
-stereo, an extra odd-sized chunk before `data`).
+stereo, an extra odd-sized chunk before `data`). Multichannel CSV and JSON bodies exercise
+`parse_record_channels` and the JSON `channels` form.
 """
 import gzip
 import math
@@ -97,6 +98,12 @@ def main():
     write("json_body", "bad-time.json",
           '{"sample_rate_hz":8000,"samples":[1e-3,-2.5E+2],"recorded_at":"2026-02-30T25:00:00+01:00"}')
     write("json_body", "empty.json", '{"sample_rate_hz":8000,"samples":[]}')
+    y = signal(64, seed=2)
+    write("json_body", "channels.json",
+          '{"sample_rate_hz": 25600, "channels": {"a1": [%s], "a2": [%s]}, "shaft_hz": 30}'
+          % (",".join("%.4g" % v for v in short), ",".join("%.4g" % v for v in y)))
+    write("json_body", "channels-and-samples.json",
+          '{"sample_rate_hz":1,"samples":[1,2],"channels":{"a1":[1,2],"a1":[3]}}')
 
     # CSV (text/csv and .csv files)
     write("csv", "one-column.csv", "".join("%.9e\n" % v for v in x))
@@ -112,6 +119,13 @@ def main():
     write("csv", "nonuniform.csv", "t,v\n0,1\n0.1,2\n0.5,3\n")
     write("csv", "nan.csv", "1\n2\nnan\ninf\n")
     write("csv", "ragged.csv", "1,2\n3\n")
+    # Several channels, as the SpectraQuest records (a1..a4), with and without a time column.
+    chans = [signal(64, seed=s) for s in (3, 4, 5, 6)]
+    write("csv", "four-channels.csv",
+          "a1,a2,a3,a4\n" + "".join("%.6f,%.6f,%.6f,%.6f\n" % r for r in zip(*chans)))
+    write("csv", "time-channels.csv",
+          "time,a1,a2\n" + "".join("%.8f,%.6f,%.6f\n" % (i / FS, a, b)
+                                    for i, (a, b) in enumerate(zip(chans[0], chans[1]))))
 
     # gzip (.csv.gz files read by the CLI)
     write("csv_gz", "one-column.csv.gz", gzip.compress("".join("%.9e\n" % v for v in x).encode(), 9, mtime=0))

@@ -70,10 +70,30 @@ pub enum Error {
         longest_run: usize,
     },
     /// The record's format carries no sample rate and none was given.
-    #[error("{format} carries no sample rate: give it (--sample-rate HZ)")]
+    #[error("{format} carries no sample rate: {give}")]
     MissingSampleRate {
         /// What lacks it, e.g. "raw f32 (no header)".
         format: &'static str,
+        /// How to give it: `"give it (--sample-rate HZ)"` from the single-channel reader the
+        /// CLI uses, `"give the sample rate in Hz"` from the multichannel one (no CLI flag).
+        give: &'static str,
+    },
+    /// A check failed on one channel of a multichannel record: the channel's name and the
+    /// error (one of the record variants: [`Error::NonFiniteSample`], [`Error::FlatRecord`],
+    /// …; see [`Error::split_channel`]). The message names no CLI flag.
+    #[error("channel `{channel}`: {error}")]
+    InChannel { channel: String, error: Box<Error> },
+    /// A channel was asked for that the record does not have; `available` lists its channels
+    /// in order (a channel is chosen by name or by 0-based index). The message names no CLI
+    /// flag.
+    #[error(
+        "no channel `{requested}` in the record; its channels are {} (choose one by name or by \
+         index from 0)",
+        list_channels(.available)
+    )]
+    UnknownChannel {
+        requested: String,
+        available: Vec<String>,
     },
     /// A record sample is NaN or ±∞.
     #[error("sample {index} of the record is {value}; the record must contain only finite numbers")]
@@ -134,7 +154,41 @@ pub enum Error {
     },
 }
 
+/// `` `a1`, `a2`, `a3` ``; past 16 names, the first 16 and how many there are in all (a WAV
+/// header may declare 65 535 channels).
+fn list_channels(names: &[String]) -> String {
+    const SHOWN: usize = 16;
+    let mut s = names
+        .iter()
+        .take(SHOWN)
+        .map(|n| format!("`{n}`"))
+        .collect::<Vec<_>>()
+        .join(", ");
+    if names.len() > SHOWN {
+        s.push_str(&format!(", … ({} in all)", names.len()));
+    }
+    s
+}
+
 impl Error {
+    /// `self` as the error of channel `channel` ([`Error::InChannel`]).
+    pub fn in_channel(self, channel: impl Into<String>) -> Self {
+        Error::InChannel {
+            channel: channel.into(),
+            error: Box::new(self),
+        }
+    }
+
+    /// The channel an error belongs to, if any, and the error itself: `(Some("a2"), e)` for
+    /// [`Error::InChannel`], `(None, self)` otherwise. For mapping errors by their kind (an
+    /// HTTP problem per variant) without losing the channel.
+    pub fn split_channel(&self) -> (Option<&str>, &Error) {
+        match self {
+            Error::InChannel { channel, error } => (Some(channel), error),
+            other => (None, other),
+        }
+    }
+
     /// Shorthand for [`Error::InvalidParameter`].
     pub fn param(name: impl Into<String>, value: f64, reason: impl Into<String>) -> Self {
         Error::InvalidParameter {

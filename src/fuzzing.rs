@@ -12,7 +12,8 @@ use crate::gearbox::Gearbox;
 use crate::model::Wear;
 use crate::model::rig_b::{ModelBConfig, ModelBOptions};
 use crate::record::{
-    Column, Format, MAX_DECOMPRESSED_BYTES, ReadOptions, Record, gunzip, parse_record,
+    Column, Format, MAX_DECOMPRESSED_BYTES, MultiRecord, ReadOptions, Record, gunzip, parse_record,
+    parse_record_channels,
 };
 use crate::service::error::ApiError;
 use crate::service::records::{BodyFormat, Decoded, JsonRecord, decode, parse_query};
@@ -116,6 +117,109 @@ pub fn check_record(r: &Record, opts: &ReadOptions, max_samples: usize, what: &s
     );
 }
 
+/// What `parse_record_channels` returns: at least one channel, names non-empty and distinct,
+/// every channel of one non-zero length with finite samples, a positive finite rate (the one
+/// given if one was given), never more samples in all than `max_samples`; only the channel
+/// asked for when `opts.column` is given. An error names no CLI flag (`--…`) unless the input
+/// itself holds `--` (a header name, a bad number): the service sends these to HTTP clients.
+pub fn check_channels(
+    r: &crate::Result<MultiRecord>,
+    opts: &ReadOptions,
+    data: &[u8],
+    max_samples: usize,
+    what: &str,
+) {
+    let r = match r {
+        Ok(r) => r,
+        Err(e) => {
+            if !data.windows(2).any(|w| w == b"--") {
+                let m = e.to_string();
+                assert!(
+                    !m.contains("--"),
+                    "{what}: a multichannel error names a flag: {m}"
+                );
+            }
+            return;
+        }
+    };
+    assert!(!r.channels.is_empty(), "{what}: a record of no channel");
+    if opts.column.is_some() {
+        assert_eq!(r.channels.len(), 1, "{what}: one channel asked for");
+    }
+    let n = r.channels[0].samples.len();
+    let mut total = 0usize;
+    for (k, c) in r.channels.iter().enumerate() {
+        assert!(!c.name.is_empty(), "{what}: channel {k} has no name");
+        assert!(
+            r.channels[..k].iter().all(|d| d.name != c.name),
+            "{what}: two channels `{}`",
+            c.name
+        );
+        assert!(
+            n > 0 && c.samples.len() == n,
+            "{what}: channel `{}` has {} samples, channel 0 {n}",
+            c.name,
+            c.samples.len()
+        );
+        assert!(
+            c.samples.iter().all(|v| v.is_finite()),
+            "{what}: non-finite sample accepted in `{}`",
+            c.name
+        );
+        total += n;
+    }
+    assert!(
+        total <= max_samples,
+        "{what}: {total} samples from an input that can hold at most {max_samples}"
+    );
+    assert!(
+        r.sample_rate.is_finite() && r.sample_rate > 0.0,
+        "{what}: sample rate {} returned",
+        r.sample_rate
+    );
+    if let Some(fs) = opts.sample_rate {
+        assert_eq!(
+            r.sample_rate, fs,
+            "{what}: the given sample rate was not used"
+        );
+    }
+}
+
+/// The multichannel reader on `data` as `format` with `cases`; when reading every channel
+/// succeeds, choosing each of its first four channels (by name, and by index) gives that
+/// channel alone.
+fn channels_cli(data: &[u8], format: Format, cases: &[(Option<f64>, Option<Column>)], what: &str) {
+    for (fs, col) in cases {
+        let o = opts(format, *fs, col.clone());
+        let r = parse_record_channels(data, format, &o, "fuzz");
+        let what = format!("{what} channels {o:?}");
+        check_channels(&r, &o, data, data.len(), &what);
+        let (Ok(all), None) = (&r, col) else {
+            continue;
+        };
+        for (k, c) in all.channels.iter().enumerate().take(4) {
+            // An index is first looked up as a name (a header `1,0` is legal).
+            let by_index = all
+                .channel(&k.to_string())
+                .expect("an index below the count");
+            for (key, want) in [
+                (Column::Name(c.name.clone()), c),
+                (Column::Index(k), by_index),
+            ] {
+                let o = opts(format, *fs, Some(key));
+                match parse_record_channels(data, format, &o, "fuzz") {
+                    Ok(one) => assert_eq!(
+                        one.channels.as_slice(),
+                        std::slice::from_ref(want),
+                        "{what}: {o:?} is not that channel"
+                    ),
+                    Err(e) => panic!("{what}: {o:?} refused: {e}"),
+                }
+            }
+        }
+    }
+}
+
 fn opts(format: Format, sample_rate: Option<f64>, column: Option<Column>) -> ReadOptions {
     ReadOptions {
         format: Some(format),
@@ -210,6 +314,8 @@ pub fn json_fast_path_agrees(data: &[u8]) {
                 }
                 (x, y) => assert_eq!(x, y, "json: shaft_hz: {}", body()),
             }
+            // The `channels` form always goes through serde_json: equal, not within an ulp.
+            assert_eq!(a.channels, b.channels, "json: channels: {}", body());
             assert_eq!(
                 (a.recorded_at, a.sensor),
                 (b.recorded_at, b.sensor),
@@ -249,6 +355,17 @@ fn csv_cli(data: &[u8], what: &str) {
             check_record(&r, &o, lines, &format!("{what} {o:?}"));
         }
     }
+    channels_cli(
+        data,
+        Format::Csv,
+        &[
+            (None, None),
+            (Some(FS), None),
+            (Some(FS), Some(Column::Index(1))),
+            (None, Some(Column::Name("a1".into()))),
+        ],
+        what,
+    );
 }
 
 /// A `.gz` record as `read_record` reads it: [`gunzip`] with the CLI's limit, then the CSV
@@ -313,6 +430,24 @@ pub fn f32_raw(data: &[u8]) {
         parse_record(data, Format::F32, &o, "fuzz").is_err(),
         "raw f32 without a sample rate accepted"
     );
+    // The multichannel reader: one channel `"0"`, the same samples, the same verdict.
+    let o = opts(Format::F32, Some(FS), None);
+    let r = parse_record_channels(data, Format::F32, &o, "fuzz");
+    check_channels(&r, &o, data, data.len() / 4, "f32 channels");
+    match r {
+        Ok(r) => {
+            assert!(valid, "invalid f32 input accepted as channels");
+            assert_eq!(r.names(), ["0"], "f32: channel names");
+            for (a, b) in r.channels[0].samples.iter().zip(&values) {
+                assert_eq!(
+                    a.to_bits(),
+                    (*b as f64).to_bits(),
+                    "f32 channels: value changed"
+                );
+            }
+        }
+        Err(e) => assert!(!valid, "valid f32 input refused as channels: {e}"),
+    }
 }
 
 /// RIFF/WAVE as the service (`audio/wav`) and the CLI read it (channel 0 by default, channel
@@ -341,6 +476,26 @@ pub fn wav(data: &[u8]) {
                 "wav: channel 0 differs from the default channel"
             ),
             _ => {}
+        }
+    }
+    let cases = [
+        (None, None),
+        (Some(8000.0), None),
+        (None, Some(Column::Index(1))),
+    ];
+    channels_cli(data, Format::Wav, &cases, "wav");
+    // Every channel read together is the channel the single-channel reader picks.
+    if let Ok(all) = parse_record_channels(data, Format::Wav, &opts(Format::Wav, None, None), "f") {
+        for (k, c) in all.channels.iter().enumerate().take(4) {
+            let o = opts(Format::Wav, None, Some(Column::Index(k)));
+            match parse_record(data, Format::Wav, &o, "fuzz") {
+                Ok(r) => assert_eq!(
+                    (r.samples.as_slice(), r.sample_rate),
+                    (c.samples.as_slice(), all.sample_rate),
+                    "wav: channel {k} differs between the readers"
+                ),
+                Err(e) => panic!("wav: channel {k} read together, refused alone: {e}"),
+            }
         }
     }
 }

@@ -55,27 +55,132 @@ impl BodyFormat {
     }
 }
 
-/// The JSON body.
+/// The JSON body: one channel, `{"sample_rate_hz": n, "samples": [..], …}`, or several,
+/// `{"sample_rate_hz": n, "channels": {"a1": [..], "a2": [..]}, …}` (exactly one of
+/// `samples` and `channels`; channel names non-empty and distinct, kept in the body's order).
+/// [`JsonRecord::into_channels`] gives either form as channels.
 #[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(try_from = "JsonRecordBody")]
 pub struct JsonRecord {
     pub sample_rate_hz: f64,
+    /// The `samples` form's samples; empty in the `channels` form.
     pub samples: Vec<f64>,
-    #[serde(default)]
+    /// The `channels` form's channels, in the body's order; `None` in the `samples` form.
+    pub channels: Option<Vec<crate::record::Channel>>,
     pub shaft_hz: Option<f64>,
-    #[serde(default)]
     pub recorded_at: Option<String>,
-    #[serde(default)]
     pub sensor: Option<String>,
+}
+
+/// The members as written, before the one-of rule on `samples` / `channels`.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct JsonRecordBody {
+    sample_rate_hz: f64,
+    // Absent is `None`; present must be the form's value (`null` is refused, as before
+    // `channels` existed).
+    #[serde(default, deserialize_with = "present")]
+    samples: Option<Vec<f64>>,
+    #[serde(default, deserialize_with = "present")]
+    channels: Option<JsonChannels>,
+    #[serde(default)]
+    shaft_hz: Option<f64>,
+    #[serde(default)]
+    recorded_at: Option<String>,
+    #[serde(default)]
+    sensor: Option<String>,
+}
+
+/// A member that, when present, must hold a `T` (not `null`).
+fn present<'de, D: serde::Deserializer<'de>, T: Deserialize<'de>>(
+    d: D,
+) -> Result<Option<T>, D::Error> {
+    T::deserialize(d).map(Some)
+}
+
+impl TryFrom<JsonRecordBody> for JsonRecord {
+    type Error = String;
+
+    fn try_from(b: JsonRecordBody) -> Result<JsonRecord, String> {
+        let (samples, channels) = match (b.samples, b.channels) {
+            (Some(s), None) => (s, None),
+            (None, Some(c)) => (Vec::new(), Some(c.0)),
+            (Some(_), Some(_)) => {
+                return Err(
+                    "the record has both `samples` and `channels`; give `samples` \
+                     for one channel or `channels` for several, not both"
+                        .into(),
+                );
+            }
+            (None, None) => {
+                return Err(
+                    "missing field `samples` (an array of numbers, one channel) or \
+                     `channels` (an object of channel name: array of numbers)"
+                        .into(),
+                );
+            }
+        };
+        Ok(JsonRecord {
+            sample_rate_hz: b.sample_rate_hz,
+            samples,
+            channels,
+            shaft_hz: b.shaft_hz,
+            recorded_at: b.recorded_at,
+            sensor: b.sensor,
+        })
+    }
+}
+
+/// `{"a1": [..], "a2": [..]}`, in the body's order, refusing an empty object, an empty
+/// name and a name given twice.
+struct JsonChannels(Vec<crate::record::Channel>);
+
+impl<'de> Deserialize<'de> for JsonChannels {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Visitor;
+        impl<'de> serde::de::Visitor<'de> for Visitor {
+            type Value = JsonChannels;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("an object of channel name: array of numbers")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(
+                self,
+                mut map: A,
+            ) -> Result<JsonChannels, A::Error> {
+                use crate::record::Channel;
+                use serde::de::Error as _;
+                let mut out: Vec<Channel> = Vec::new();
+                while let Some(name) = map.next_key::<String>()? {
+                    if name.is_empty() {
+                        return Err(A::Error::custom("a channel name in `channels` is empty"));
+                    }
+                    if out.iter().any(|c| c.name == name) {
+                        return Err(A::Error::custom(format!(
+                            "channel `{name}` appears twice in `channels`"
+                        )));
+                    }
+                    let samples = map.next_value::<Vec<f64>>()?;
+                    out.push(Channel { name, samples });
+                }
+                if out.is_empty() {
+                    return Err(A::Error::custom(
+                        "`channels` holds no channel; give at least one",
+                    ));
+                }
+                Ok(JsonChannels(out))
+            }
+        }
+        d.deserialize_map(Visitor)
+    }
 }
 
 impl JsonRecord {
     /// Parse a JSON body: the same answer as `serde_json::from_slice::<JsonRecord>`, faster for
-    /// the usual body. [`fast_json_record`] reads the plain form (the five known members once
-    /// each, numbers, strings without escapes, `null` for the optional ones) in one pass,
-    /// samples included; anything else — an escape, an unknown or repeated member, a sample that
-    /// is not a number or overflows, any syntax error — goes through `serde_json` whole, so every
-    /// error message is serde_json's.
+    /// the usual body. [`fast_json_record`] reads the plain one-channel form (the five known
+    /// members once each, numbers, strings without escapes, `null` for the optional ones) in
+    /// one pass, samples included; anything else — the `channels` form, an escape, an unknown
+    /// or repeated member, a sample that is not a number or overflows, any syntax error — goes
+    /// through `serde_json` whole, so every error message is serde_json's.
     ///
     /// Numbers are correctly rounded (`fast_float2`, like Rust's `str::parse::<f64>`);
     /// serde_json's default number path may differ from that by one unit in the last place
@@ -84,6 +189,18 @@ impl JsonRecord {
         match fast_json_record(bytes) {
             Some(r) => Ok(r),
             None => serde_json::from_slice(bytes),
+        }
+    }
+
+    /// The record's channels: the `channels` form's, in the body's order, or the `samples`
+    /// form's one channel, named `"0"` (as a one-column CSV's or a raw f32 body's).
+    pub fn into_channels(self) -> Vec<crate::record::Channel> {
+        match self.channels {
+            Some(c) => c,
+            None => vec![crate::record::Channel {
+                name: "0".into(),
+                samples: self.samples,
+            }],
         }
     }
 }
@@ -138,6 +255,7 @@ fn fast_json_record(b: &[u8]) -> Option<JsonRecord> {
     Some(JsonRecord {
         sample_rate_hz: rate?,
         samples: samples?,
+        channels: None,
         shaft_hz: shaft.flatten(),
         recorded_at: recorded_at.flatten(),
         sensor: sensor.flatten(),
@@ -1192,6 +1310,13 @@ mod tests {
             r#"{"sample_rate_hz": 25600, "samples": [1], "shaft_hz": 30, "shaft_hz": 31}"#,
             "\u{feff}{\"sample_rate_hz\": 25600, \"samples\": [1]}",
             "{\"sample_rate_hz\": 25600,\u{a0}\"samples\": [1]}",
+            r#"{"sample_rate_hz": 25600, "channels": {"a1": [1, 2], "a2": [3, 4]}}"#,
+            r#"{"channels": {"a1": [1]}, "sample_rate_hz": 25600, "sensor": "s"}"#,
+            r#"{"sample_rate_hz": 25600, "samples": [1], "channels": {"a1": [1]}}"#,
+            r#"{"sample_rate_hz": 25600, "channels": {"a1": [1]}, "samples": [1]}"#,
+            r#"{"sample_rate_hz": 25600, "channels": {}}"#,
+            r#"{"sample_rate_hz": 25600, "channels": null}"#,
+            r#"{"sample_rate_hz": 25600, "channels": [[1]]}"#,
         ] {
             let fast = JsonRecord::from_json(body.as_bytes()).map_err(|e| e.to_string());
             let slow = serde_record(body).map_err(|e| e.to_string());
@@ -1200,6 +1325,7 @@ mod tests {
                 (Ok(a), Ok(b)) => assert_eq!(
                     (
                         &a.samples,
+                        &a.channels,
                         a.sample_rate_hz,
                         a.shaft_hz,
                         &a.recorded_at,
@@ -1207,6 +1333,7 @@ mod tests {
                     ),
                     (
                         &b.samples,
+                        &b.channels,
                         b.sample_rate_hz,
                         b.shaft_hz,
                         &b.recorded_at,
@@ -1256,5 +1383,97 @@ mod tests {
         }
         // The edits leave a good share of bodies valid, so the fast path is exercised too.
         assert!(taken * 30 > total, "fast path took {taken} of {total}");
+    }
+
+    /// The several-channel form: channels in the body's order, the other members as in the
+    /// one-channel form, and `into_channels` for both forms.
+    #[test]
+    fn channels_form_and_into_channels() {
+        use crate::record::Channel;
+        let body = br#"{"sample_rate_hz": 12800, "channels": {"a2": [1, 2.5], "a1": [-1, 0]},
+            "shaft_hz": 30, "sensor": "s1"}"#;
+        let r = JsonRecord::from_json(body).unwrap();
+        assert_eq!(
+            (r.sample_rate_hz, r.shaft_hz, r.sensor.as_deref()),
+            (12800.0, Some(30.0), Some("s1"))
+        );
+        assert!(r.samples.is_empty());
+        assert_eq!(
+            r.into_channels(),
+            [
+                Channel {
+                    name: "a2".into(),
+                    samples: vec![1.0, 2.5]
+                },
+                Channel {
+                    name: "a1".into(),
+                    samples: vec![-1.0, 0.0]
+                }
+            ]
+        );
+        let r = JsonRecord::from_json(br#"{"sample_rate_hz": 1, "samples": [1, 2]}"#).unwrap();
+        assert_eq!(r.channels, None);
+        assert_eq!(
+            r.into_channels(),
+            [Channel {
+                name: "0".into(),
+                samples: vec![1.0, 2.0]
+            }]
+        );
+    }
+
+    /// Each mistake in the choice of form gets its own serde_json error, the same through
+    /// `from_json` as through serde_json.
+    #[test]
+    fn channels_form_errors() {
+        for (body, want) in [
+            (
+                r#"{"sample_rate_hz": 1, "samples": [1], "channels": {"a": [1]}}"#,
+                "the record has both `samples` and `channels`",
+            ),
+            (
+                r#"{"sample_rate_hz": 1}"#,
+                "missing field `samples` (an array of numbers, one channel) or `channels`",
+            ),
+            (
+                r#"{"sample_rate_hz": 1, "channels": {}}"#,
+                "`channels` holds no channel; give at least one at line 1 column",
+            ),
+            (
+                r#"{"sample_rate_hz": 1, "channels": {"a1": [1], "a1": [2]}}"#,
+                "channel `a1` appears twice in `channels` at line 1 column",
+            ),
+            (
+                r#"{"sample_rate_hz": 1, "channels": {"": [1]}}"#,
+                "a channel name in `channels` is empty",
+            ),
+            (
+                r#"{"sample_rate_hz": 1, "channels": [[1, 2]]}"#,
+                "invalid type: sequence, expected an object of channel name: array of numbers",
+            ),
+            (
+                r#"{"sample_rate_hz": 1, "channels": {"a": [1, "x"]}}"#,
+                "invalid type: string \"x\", expected f64",
+            ),
+            (
+                r#"{"sample_rate_hz": 1, "channels": null}"#,
+                "invalid type: null, expected an object of channel name",
+            ),
+            (
+                r#"{"sample_rate_hz": 1, "samples": null}"#,
+                "invalid type: null, expected a sequence",
+            ),
+            (
+                r#"{"sample_rate_hz": 1, "channel": {"a": [1]}}"#,
+                "unknown field `channel`, expected one of `sample_rate_hz`, `samples`, \
+                 `channels`",
+            ),
+        ] {
+            let e = JsonRecord::from_json(body.as_bytes())
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(want), "{body}: {e}");
+            assert_eq!(e, serde_record(body).unwrap_err().to_string(), "{body}");
+        }
     }
 }
