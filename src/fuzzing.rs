@@ -53,7 +53,10 @@ fn check_channel(samples: &[f64], limits: &Limits, what: &str) {
 
 /// What the service's `decode` returns must be a record the diagnosis may be handed.
 pub fn check_decoded(d: &Decoded, limits: &Limits, body_len: usize, what: &str) {
-    assert!(!d.channels.is_empty(), "{what}: a record without channels accepted");
+    assert!(
+        !d.channels.is_empty(),
+        "{what}: a record without channels accepted"
+    );
     for (name, samples) in &d.channels {
         check_channel(samples, limits, &format!("{what}, channel {name}"));
     }

@@ -53,7 +53,12 @@ pub fn record_features(
     let hi = 0.45 * rec.sample_rate;
     let mut values = BTreeMap::new();
     let ratio = (hi / BAND_LO_HZ).powf(1.0 / BANDS as f64);
-    let total: f64 = sp.amplitude.iter().map(|a| a * a).sum::<f64>().max(f64::MIN_POSITIVE);
+    let total: f64 = sp
+        .amplitude
+        .iter()
+        .map(|a| a * a)
+        .sum::<f64>()
+        .max(f64::MIN_POSITIVE);
     for b in 0..BANDS {
         let (lo, up) = (
             BAND_LO_HZ * ratio.powi(b as i32),
@@ -66,7 +71,10 @@ pub fn record_features(
             .filter(|(f, _)| **f >= lo && **f < up)
             .map(|(_, a)| a * a)
             .sum();
-        values.insert(format!("band_{:05.0}hz", lo), ((p + 1e-12 * total) / total).ln());
+        values.insert(
+            format!("band_{:05.0}hz", lo),
+            ((p + 1e-12 * total) / total).ln(),
+        );
     }
     values.insert("kurtosis".into(), kurtosis(&rec.samples).ln());
     values.insert("crest_factor".into(), crest_factor(&rec.samples).ln());

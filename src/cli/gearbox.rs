@@ -110,7 +110,9 @@ pub fn run(a: GearboxArgs) -> Result<()> {
             let probe = crate::gearbox::GearboxDescription::parse(&text, fmt, &origin)?;
             let id = a.id.unwrap_or_else(|| probe.name.clone());
             if crate::service::gearboxes::check_gearbox_id(&id).is_err() {
-                bail!("a gearbox id is 1 to 64 characters of letters, digits, `.`, `_` and `-`, got `{id}`");
+                bail!(
+                    "a gearbox id is 1 to 64 characters of letters, digits, `.`, `_` and `-`, got `{id}`"
+                );
             }
             if id == crate::service::gearboxes::BUILTIN_ID {
                 bail!("`{id}` is the built-in paper rig; choose another --id");
@@ -135,7 +137,10 @@ pub fn run(a: GearboxArgs) -> Result<()> {
                 "gearbox `{id}` {what}; a running `gearwear serve` on this store precomputes its \
                  table (watch: gearwear gearbox show --id {id})"
             );
-            println!("{}", serde_json::json!({"id": id, "hash": row.hash, "outcome": format!("{outcome:?}").to_lowercase()}));
+            println!(
+                "{}",
+                serde_json::json!({"id": id, "hash": row.hash, "outcome": format!("{outcome:?}").to_lowercase()})
+            );
         }
         GearboxCommand::List(a) => {
             let st = open_store(&a.database_url)?;
@@ -150,7 +155,10 @@ pub fn run(a: GearboxArgs) -> Result<()> {
             let id = s.id.unwrap_or_default();
             let st = open_store(&s.store.database_url)?;
             let Some(row) = crate::service::cli::runtime()?.block_on(st.get_gearbox(&id))? else {
-                bail!("no gearbox `{id}` in {}; add it with `gearwear gearbox add --gearbox FILE --id {id}`", s.store.database_url);
+                bail!(
+                    "no gearbox `{id}` in {}; add it with `gearwear gearbox add --gearbox FILE --id {id}`",
+                    s.store.database_url
+                );
             };
             let d: crate::gearbox::GearboxDescription = serde_json::from_str(&row.description)?;
             let gb = crate::gearbox::Gearbox::new(d)?;

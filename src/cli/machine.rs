@@ -42,7 +42,10 @@ pub fn run(a: MachineArgs) -> Result<()> {
     match a.command {
         MachineCommand::Set(s) => {
             if crate::service::records::check_machine_id(&s.id).is_err() {
-                bail!("a machine id is 1 to 64 characters of letters, digits, `.`, `_` and `-`, got `{}`", s.id);
+                bail!(
+                    "a machine id is 1 to 64 characters of letters, digits, `.`, `_` and `-`, got `{}`",
+                    s.id
+                );
             }
             if let Some(hz) = s.input_shaft_hz
                 && !(hz.is_finite() && hz > 0.0 && hz <= 1000.0)

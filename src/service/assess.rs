@@ -213,12 +213,19 @@ mod tests {
         assert!(a.reason.contains("baseline"), "{}", a.reason);
         let a = alert(None, None, &TH, Some("the table is not ready"));
         assert_eq!(a.level, "unknown");
-        assert!(a.reason.starts_with("the table is not ready"), "{}", a.reason);
+        assert!(
+            a.reason.starts_with("the table is not ready"),
+            "{}",
+            a.reason
+        );
     }
 
     #[test]
     fn a_poor_fit_defers_to_the_baseline() {
-        assert_eq!(alert(Some((0.9, true, 40.0)), Some(&nov(1.0)), &TH, None).level, "ok");
+        assert_eq!(
+            alert(Some((0.9, true, 40.0)), Some(&nov(1.0)), &TH, None).level,
+            "ok"
+        );
         let a = alert(Some((0.1, true, 40.0)), Some(&nov(4.0)), &TH, None);
         assert_eq!((a.level, a.basis), ("warning", "novelty"));
         assert_eq!(alert(None, Some(&nov(6.5)), &TH, None).level, "alarm");
@@ -226,9 +233,18 @@ mod tests {
 
     #[test]
     fn a_good_fit_and_a_baseline_take_the_more_severe() {
-        assert_eq!(alert(Some((0.9, false, 1.0)), Some(&nov(1.0)), &TH, None).level, "alarm");
-        assert_eq!(alert(Some((0.1, false, 1.0)), Some(&nov(4.0)), &TH, None).level, "warning");
-        assert_eq!(alert(Some((0.6, false, 1.0)), None, &TH, None).level, "warning");
+        assert_eq!(
+            alert(Some((0.9, false, 1.0)), Some(&nov(1.0)), &TH, None).level,
+            "alarm"
+        );
+        assert_eq!(
+            alert(Some((0.1, false, 1.0)), Some(&nov(4.0)), &TH, None).level,
+            "warning"
+        );
+        assert_eq!(
+            alert(Some((0.6, false, 1.0)), None, &TH, None).level,
+            "warning"
+        );
         assert_eq!(alert(Some((0.1, false, 1.0)), None, &TH, None).level, "ok");
     }
 
@@ -248,7 +264,11 @@ mod tests {
                 reason: String::new(),
             },
         };
-        let v = vec![ch("a1", "ok", 1.0), ch("a2", "warning", 3.5), ch("a3", "warning", 5.0)];
+        let v = vec![
+            ch("a1", "ok", 1.0),
+            ch("a2", "warning", 3.5),
+            ch("a3", "warning", 5.0),
+        ];
         assert_eq!(deciding(&v), 2);
         let v = vec![ch("a1", "unknown", 0.0), ch("a2", "ok", 2.0)];
         assert_eq!(deciding(&v), 0);

@@ -285,7 +285,9 @@ pub async fn put(
             StatusCode::CONFLICT,
             "builtin-gearbox",
             "Built-in gearbox",
-            format!("`{BUILTIN_ID}` is the built-in paper rig and cannot be replaced; choose another id"),
+            format!(
+                "`{BUILTIN_ID}` is the built-in paper rig and cannot be replaced; choose another id"
+            ),
         ));
     }
     let (row, gb) = gearbox_row(&id, text, format, "request body").map_err(|e| {
@@ -297,9 +299,12 @@ pub async fn put(
         .with("gearbox_id", id.as_str())
     })?;
     let outcome = app.store.put_gearbox(&row).await.map_err(|e| match e {
-        StoreError::Conflict(m) => {
-            ApiError::new(StatusCode::CONFLICT, "builtin-gearbox", "Built-in gearbox", m)
-        }
+        StoreError::Conflict(m) => ApiError::new(
+            StatusCode::CONFLICT,
+            "builtin-gearbox",
+            "Built-in gearbox",
+            m,
+        ),
         other => other.into(),
     })?;
     app.job_wake.notify_one();
@@ -354,7 +359,11 @@ pub async fn list(
 /// Where a job keeps its finished grid points (resumed after a restart on this host).
 fn job_partial(row: &GearboxRow) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join("gearwear-table-jobs");
-    partial_path(&dir.join(format!("{}-{}.json", row.id, &row.hash[..16.min(row.hash.len())])))
+    partial_path(&dir.join(format!(
+        "{}-{}.json",
+        row.id,
+        &row.hash[..16.min(row.hash.len())]
+    )))
 }
 
 /// The table job of one gearbox, as a blocking computation.
@@ -469,8 +478,12 @@ async fn run_job(
         .await
     {
         Ok(true) => tracing::info!(gearbox = %job.id, ready = ok, "table job finished"),
-        Ok(false) => tracing::warn!(gearbox = %job.id, "table job finished after losing its lease; dropped"),
-        Err(e) => tracing::warn!(gearbox = %job.id, error = %e, "table job result not stored; it will run again"),
+        Ok(false) => {
+            tracing::warn!(gearbox = %job.id, "table job finished after losing its lease; dropped")
+        }
+        Err(e) => {
+            tracing::warn!(gearbox = %job.id, error = %e, "table job result not stored; it will run again")
+        }
     }
     Continue(())
 }

@@ -215,7 +215,9 @@ pub async fn put(
             return Err(ApiError::unprocessable(
                 "unknown-gearbox",
                 "Unknown gearbox",
-                format!("no gearbox `{gearbox}`: PUT its description to /v1/gearboxes/{gearbox} first"),
+                format!(
+                    "no gearbox `{gearbox}`: PUT its description to /v1/gearboxes/{gearbox} first"
+                ),
             )
             .with("gearbox_id", gearbox.as_str()));
         }

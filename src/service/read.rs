@@ -10,9 +10,9 @@ use sha2::{Digest, Sha256};
 use super::AppState;
 use super::auth::Caller;
 use super::error::{ApiError, ApiResult};
+use super::gearboxes::BUILTIN_ID;
 use super::records::check_machine_id;
 use super::time::{parse_rfc3339, rfc3339};
-use super::gearboxes::BUILTIN_ID;
 use crate::store::{DiagnosisRow, MachineRow, novelty_json, wear_json};
 
 /// How many diagnoses the machine view's wear trend shows.

@@ -501,8 +501,17 @@ mod bytes_ {
 /// Turn a library error from decoding or diagnosing into a problem.
 pub fn problem_from_error(e: &crate::Error) -> ApiError {
     use crate::Error as E;
+    if let (Some(ch), inner) = e.split_channel() {
+        let mut p = problem_from_error(inner);
+        p.detail = format!("channel `{ch}`: {}", p.detail);
+        return p.with("channel", ch);
+    }
     let un = ApiError::unprocessable;
     match e {
+        E::UnknownChannel { available, .. } => {
+            un("unknown-channel", "Unknown channel", e.to_string())
+                .with("available", json!(available))
+        }
         E::RecordFormat { reason, .. } => ApiError::bad_request(
             "malformed-record",
             "Malformed record",
@@ -568,8 +577,8 @@ fn decode_binary(
     format: BodyFormat,
     bytes: &[u8],
     sample_rate: Option<f64>,
-) -> ApiResult<(Vec<f64>, f64)> {
-    use crate::record::{Format, ReadOptions, parse_record};
+) -> ApiResult<(Channels, f64)> {
+    use crate::record::{Format, ReadOptions, parse_record_channels};
     let f = match format {
         BodyFormat::Csv => Format::Csv,
         BodyFormat::F32 => Format::F32,
@@ -581,16 +590,27 @@ fn decode_binary(
         sample_rate,
         column: None,
     };
-    let r = parse_record(bytes, f, &opts, "body").map_err(|e| {
+    let r = parse_record_channels(bytes, f, &opts, "body").map_err(|e| {
         let mut p = problem_from_error(&e);
         // The parsers speak CLI; a web client sets a query parameter.
         p.detail = p
             .detail
             .replace("--sample-rate HZ", "`?sample_rate_hz=…`")
-            .replace("--sample-rate", "`?sample_rate_hz=…`");
+            .replace("--sample-rate", "`?sample_rate_hz=…`")
+            .replace(
+                "give the sample rate in Hz",
+                "give it (`?sample_rate_hz=…`)",
+            )
+            .replace("give the sample rate", "give `?sample_rate_hz=…`");
         p
     })?;
-    Ok((r.samples, r.sample_rate))
+    Ok((
+        r.channels
+            .into_iter()
+            .map(|c| (c.name, c.samples))
+            .collect(),
+        r.sample_rate,
+    ))
 }
 
 /// The body format named by `Content-Type` (415 problem otherwise).
@@ -628,11 +648,14 @@ pub fn parse_query(query: Option<&str>) -> ApiResult<RecordQuery> {
     })
 }
 
+/// `(name, samples)` of each channel of a record.
+pub type Channels = Vec<(String, Vec<f64>)>;
+
 /// A decoded, validated record and what the request said about it.
 #[derive(Debug, Clone)]
 pub struct Decoded {
     /// `(name, samples)` of each channel; a single-channel record's one is named `"0"`.
-    pub channels: Vec<(String, Vec<f64>)>,
+    pub channels: Channels,
     pub sample_rate_hz: f64,
     pub shaft_hz: Option<f64>,
     pub recorded_at: Option<String>,
@@ -655,7 +678,11 @@ fn too_many_samples(samples: usize, limit: usize) -> ApiError {
 impl Decoded {
     /// The channels to diagnose: the `channel` query parameter's (by name or 0-based index),
     /// else those the machine lists, else all.
-    pub fn select(&self, wanted: Option<&str>, machine: Option<&[String]>) -> ApiResult<Vec<usize>> {
+    pub fn select(
+        &self,
+        wanted: Option<&str>,
+        machine: Option<&[String]>,
+    ) -> ApiResult<Vec<usize>> {
         let names = || {
             self.channels
                 .iter()
@@ -714,7 +741,11 @@ impl Decoded {
                 format!(
                     "the record has {} channels ({}); choose one with the `channel` query parameter",
                     self.channels.len(),
-                    self.channels.iter().map(|(n, _)| n.as_str()).collect::<Vec<_>>().join(", ")
+                    self.channels
+                        .iter()
+                        .map(|(n, _)| n.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
                 ),
             ));
         }
@@ -734,9 +765,9 @@ pub fn decode(
     let mut shaft = parse_number("shaft_hz", &q.shaft_hz)?;
     let mut recorded_at = q.recorded_at.clone();
     let mut sensor = q.sensor.clone();
-    let (samples, fs) = match format {
+    let (channels, fs) = match format {
         BodyFormat::Json => {
-            let r = JsonRecord::from_json(bytes).map_err(|e| {
+            let mut r = JsonRecord::from_json(bytes).map_err(|e| {
                 let hint = if bytes.windows(3).any(|w| w == b"NaN") || bytes.windows(8).any(|w| w == b"Infinity") {
                     " (JSON has no NaN or Infinity: every sample must be a finite number)"
                 } else {
@@ -747,7 +778,7 @@ pub fn decode(
                     "Malformed JSON record",
                     format!(
                         "the body is not a valid record: {e}{hint}; expected \
-                         {{\"sample_rate_hz\": number, \"samples\": [numbers], \"shaft_hz\"?: number, \
+                         {{\"sample_rate_hz\": number, \"samples\": [numbers] or \"channels\": {{name: [numbers]}}, \"shaft_hz\"?: number, \
                          \"recorded_at\"?: RFC 3339 string, \"sensor\"?: string}}"
                     ),
                 )
@@ -756,12 +787,20 @@ pub fn decode(
                 shaft = r.shaft_hz;
             }
             if r.recorded_at.is_some() {
-                recorded_at = r.recorded_at;
+                recorded_at = r.recorded_at.take();
             }
             if r.sensor.is_some() {
-                sensor = r.sensor;
+                sensor = r.sensor.take();
             }
-            (r.samples, r.sample_rate_hz)
+            let fs = r.sample_rate_hz;
+            let chans = r.into_channels();
+            (
+                chans
+                    .into_iter()
+                    .map(|c| (c.name, c.samples))
+                    .collect::<Vec<_>>(),
+                fs,
+            )
         }
         BodyFormat::F32 if bytes.len() / 4 > limits.max_samples => {
             // Refused before decoding: no vector of more samples than allowed is built.
@@ -789,18 +828,28 @@ pub fn decode(
             "`sensor` is at most 200 characters",
         ));
     }
-    if samples.len() > limits.max_samples {
-        return Err(too_many_samples(samples.len(), limits.max_samples));
+    let total: usize = channels.iter().map(|c| c.1.len()).sum();
+    if total > limits.max_samples {
+        return Err(too_many_samples(total, limits.max_samples));
     }
     // Empty, NaN/±∞, flat or clipped samples and an impossible rate: the library's checks
-    // (the binary formats already passed them in `parse_record`; a JSON body has not).
+    // (the binary formats already passed them in `parse_record_channels`; a JSON body has
+    // not). A multichannel record's error names its channel.
     if format == BodyFormat::Json {
-        crate::record::check_signal(&samples).map_err(|e| problem_from_error(&e))?;
+        for (name, x) in &channels {
+            let r = crate::record::check_signal(x);
+            let r = if channels.len() > 1 {
+                r.map_err(|e| e.in_channel(name.clone()))
+            } else {
+                r
+            };
+            r.map_err(|e| problem_from_error(&e))?;
+        }
         crate::record::check_sample_rate(fs).map_err(|e| problem_from_error(&e))?;
     }
 
     Ok(Decoded {
-        channels: vec![("0".to_string(), samples)],
+        channels,
         sample_rate_hz: fs,
         shaft_hz: shaft,
         recorded_at,
@@ -955,7 +1004,11 @@ async fn ingest(
         if results.len() > 1 {
             m.insert(
                 "channels".into(),
-                results.iter().map(|r| r.summary()).collect::<Vec<_>>().into(),
+                results
+                    .iter()
+                    .map(|r| r.summary())
+                    .collect::<Vec<_>>()
+                    .into(),
             );
         }
         m.insert("gearbox".into(), ctx.json());
@@ -1009,7 +1062,12 @@ async fn ingest(
     let sample_count = channels.first().map(|c| c.1.len()).unwrap_or(0);
     let multi = channels.len() > 1;
     let (ea, lower, upper, motion) = match &decide.output {
-        Some(o) => (o.ea_estimate, o.ea_lower, o.ea_upper, o.motion_state.clone()),
+        Some(o) => (
+            o.ea_estimate,
+            o.ea_lower,
+            o.ea_upper,
+            o.motion_state.clone(),
+        ),
         None => (0.0, 0.0, 0.0, "unknown".to_string()),
     };
     let ing = Ingest {
@@ -1134,9 +1192,9 @@ impl ChannelJob {
                 })?),
                 None => None,
             };
-            let hint = shaft
-                .or(self.input_shaft_hz)
-                .or(output.as_ref().map(|o| o.f1_hz / self.gearbox.f1_per_input_hz));
+            let hint = shaft.or(self.input_shaft_hz).or(output
+                .as_ref()
+                .map(|o| o.f1_hz / self.gearbox.f1_per_input_hz));
             let features = crate::novelty::record_features(&rec, Some(&self.gearbox), hint)?;
             let novelty = self.baselines.get(name).map(|b| b.score(&features));
             let alert = alert(
@@ -1161,7 +1219,10 @@ impl ChannelJob {
                 None => plot_spectrum(samples, fs, o.f1_hz, &o.marks),
             },
             None => {
-                let f1 = self.input_shaft_hz.map(|h| self.gearbox.f1_hz(h)).unwrap_or(f64::NAN);
+                let f1 = self
+                    .input_shaft_hz
+                    .map(|h| self.gearbox.f1_hz(h))
+                    .unwrap_or(f64::NAN);
                 plot_spectrum(samples, fs, f1, &[])
             }
         };

@@ -18,6 +18,7 @@ both_stores!(
     a_described_gearbox_is_tabled_in_the_background_and_diagnoses_its_machine,
     a_baseline_makes_a_machine_the_model_does_not_fit_judgeable,
     a_table_job_interrupted_by_a_restart_resumes,
+    every_channel_is_diagnosed_and_the_worst_decides,
 );
 
 const SPUR: &str = include_str!("../../configs/gearboxes/spur-pair.toml");
@@ -78,7 +79,12 @@ async fn post_record(app: &TestApp, machine: &str, query: &str, body: &Value) ->
 async fn wait_ready(app: &TestApp, id: &str, limit: Duration) -> Value {
     let t0 = Instant::now();
     loop {
-        let g = get_json(app, &format!("/v1/gearboxes/{id}"), "/v1/gearboxes/{gearbox_id}").await;
+        let g = get_json(
+            app,
+            &format!("/v1/gearboxes/{id}"),
+            "/v1/gearboxes/{gearbox_id}",
+        )
+        .await;
         match g["status"].as_str().unwrap() {
             "ready" => return g,
             "failed" => panic!("table job failed: {g}"),
@@ -119,7 +125,10 @@ async fn a_described_gearbox_is_tabled_in_the_background_and_diagnoses_its_machi
     // The built-in rig is there from the start.
     let list = get_json(&app, "/v1/gearboxes", "/v1/gearboxes").await;
     let rig = &list["gearboxes"][0];
-    assert_eq!((rig["id"].as_str(), rig["status"].as_str()), (Some("wang2019"), Some("ready")));
+    assert_eq!(
+        (rig["id"].as_str(), rig["status"].as_str()),
+        (Some("wang2019"), Some("ready"))
+    );
     assert_eq!(rig["builtin"], true);
 
     // A description's own mistake comes back as a 422 naming it; only admin may PUT.
@@ -134,21 +143,43 @@ async fn a_described_gearbox_is_tabled_in_the_background_and_diagnoses_its_machi
 
     let (s, g) = put_gearbox(&app, "spur", &app.admin_key, SPUR).await;
     assert_eq!(s, 201, "{g}");
-    assert!(matches!(g["status"].as_str(), Some("queued" | "running")), "{g}");
+    assert!(
+        matches!(g["status"].as_str(), Some("queued" | "running")),
+        "{g}"
+    );
     assert_eq!(g["name"], "spur-pair");
-    assert!(g["assumed"].as_array().is_some_and(|a| !a.is_empty()), "{g}");
+    assert!(
+        g["assumed"].as_array().is_some_and(|a| !a.is_empty()),
+        "{g}"
+    );
     // 25 teeth at 25 Hz: the mesh at 625 Hz.
     let meshes = &g["kinematics"]["rates"]["meshes"];
-    assert!((meshes[0]["hz"].as_f64().unwrap() - 625.0).abs() < 1e-9, "{g}");
+    assert!(
+        (meshes[0]["hz"].as_f64().unwrap() - 625.0).abs() < 1e-9,
+        "{g}"
+    );
     let (s, again) = put_gearbox(&app, "spur", &app.admin_key, SPUR).await;
     assert_eq!((s, &again["hash"]), (200, &g["hash"]));
 
     // Machines point at stored gearboxes only.
     let (s, p) = put_machine(&app, "m-x", json!({"gearbox": "nope"})).await;
-    assert_eq!((s, p["type"].as_str()), (422, Some("urn:gearwear:problem:unknown-gearbox")));
-    let (s, m) = put_machine(&app, "m-spur", json!({"gearbox": "spur", "input_shaft_hz": 25.0})).await;
+    assert_eq!(
+        (s, p["type"].as_str()),
+        (422, Some("urn:gearwear:problem:unknown-gearbox"))
+    );
+    let (s, m) = put_machine(
+        &app,
+        "m-spur",
+        json!({"gearbox": "spur", "input_shaft_hz": 25.0}),
+    )
+    .await;
     assert_eq!((s, m["gearbox"].as_str()), (201, Some("spur")), "{m}");
-    let (s, _) = put_machine(&app, "m-spur", json!({"gearbox": "spur", "input_shaft_hz": 25.0})).await;
+    let (s, _) = put_machine(
+        &app,
+        "m-spur",
+        json!({"gearbox": "spur", "input_shaft_hz": 25.0}),
+    )
+    .await;
     assert_eq!(s, 200);
 
     // A record before the table is ready is stored and judged without a wear degree; with no
@@ -160,9 +191,16 @@ async fn a_described_gearbox_is_tabled_in_the_background_and_diagnoses_its_machi
         if d["gearbox"]["table_status"] != "ready" {
             assert!(d["wear_degree"].is_null(), "{d}");
             assert_eq!(d["alert_level"], "unknown", "{d}");
-            assert!(d["alert"]["reason"].as_str().unwrap().contains("baseline"), "{d}");
             assert!(
-                d["warnings"].as_array().unwrap().iter().any(|w| w.as_str().unwrap().contains("not ready")),
+                d["alert"]["reason"].as_str().unwrap().contains("baseline"),
+                "{d}"
+            );
+            assert!(
+                d["warnings"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .any(|w| w.as_str().unwrap().contains("not ready")),
                 "{d}"
             );
         }
@@ -174,38 +212,50 @@ async fn a_described_gearbox_is_tabled_in_the_background_and_diagnoses_its_machi
     assert_eq!(s, 201, "{d}");
     assert_eq!(d["gearbox"]["id"], "spur");
     assert_eq!(d["gearbox"]["hash"], g["hash"]);
-    let w = d["wear_degree"]["estimate"].as_f64().expect("a wear degree once ready");
+    let w = d["wear_degree"]["estimate"]
+        .as_f64()
+        .expect("a wear degree once ready");
     assert!((0.0..=1.2).contains(&w), "{d}");
-    assert!((d["f1_hz"].as_f64().unwrap() / 625.0 - 1.0).abs() < 0.02, "{d}");
+    assert!(
+        (d["f1_hz"].as_f64().unwrap() / 625.0 - 1.0).abs() < 0.02,
+        "{d}"
+    );
     let m = get_json(&app, "/v1/machines/m-spur", "/v1/machines/{machine_id}").await;
     assert_eq!(m["gearbox"]["id"], "spur");
     assert_eq!(m["configuration"]["input_shaft_hz"], 25.0);
 }
 
-/// Records the paper rig's model does not explain: a 1 kHz tone with strong lines where the
-/// rig's model has weak ones (f1/2, f1 + f2 of the rig at f1 = 1 kHz), with noise.
+/// Records the paper rig's model does not explain: 25 tones between 300 Hz and 3 kHz (the
+/// same for every record of the machine) and noise that changes with `seed`.
 fn foreign_record(seed: u64, impulses: bool) -> Value {
     let fs = 25_600.0;
-    let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(7);
-    let mut noise = || {
-        state = state
+    let lcg = |state: &mut u64| {
+        *state = state
             .wrapping_mul(6364136223846793005)
             .wrapping_add(1442695040888963407);
-        (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        (*state >> 11) as f64 / (1u64 << 53) as f64
     };
+    let mut tone_state = 42u64;
+    let tones: Vec<(f64, f64)> = (0..25)
+        .map(|_| {
+            let f = 300.0 + 2700.0 * lcg(&mut tone_state);
+            (f, 0.2 + 0.8 * lcg(&mut tone_state))
+        })
+        .collect();
+    let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(7);
+    let tau = std::f64::consts::TAU;
     let x: Vec<f64> = (0..25_600)
         .map(|i| {
             let t = i as f64 / fs;
-            let tau = std::f64::consts::TAU;
-            let mut v = (tau * 1000.0 * t).sin()
-                + 0.5 * (tau * 500.0 * t).sin()
-                + 0.8 * (tau * 1360.0 * t).sin()
-                + 0.2 * (tau * 3100.0 * t).sin()
-                + 0.3 * noise();
+            let mut v = tones
+                .iter()
+                .map(|(f, a)| a * (tau * f * t).sin())
+                .sum::<f64>()
+                + 0.6 * (lcg(&mut state) - 0.5);
             // A broken tooth: a short ringing burst once per revolution (31.25 Hz).
             if impulses {
                 let ph = (t * 31.25).fract() / 31.25;
-                v += 6.0 * (-ph * 2000.0).exp() * (tau * 4500.0 * ph).sin();
+                v += 12.0 * (-ph * 2000.0).exp() * (tau * 4500.0 * ph).sin();
             }
             v
         })
@@ -220,7 +270,10 @@ async fn a_baseline_makes_a_machine_the_model_does_not_fit_judgeable(b: Backend)
     // No description, no baseline, a record the rig's model does not fit: not `ok`.
     let (s, d) = post_record(&app, "real-1", "", &foreign_record(1, false)).await;
     assert_eq!(s, 201, "{d}");
-    assert_eq!(d["fit"]["inflated"], true, "the test record should not fit the rig: {d}");
+    assert_eq!(
+        d["fit"]["inflated"], true,
+        "the test record should not fit the rig: {d}"
+    );
     assert_eq!(d["alert_level"], "unknown", "{d}");
     assert!(d["novelty"].is_null());
     let first_record = d["record_id"].as_str().unwrap().to_string();
@@ -228,7 +281,13 @@ async fn a_baseline_makes_a_machine_the_model_does_not_fit_judgeable(b: Backend)
     // Three healthy records as the baseline; the third one's answer still has no novelty
     // (it was scored before it joined), later ones have.
     for seed in 2..=4 {
-        let (s, d) = post_record(&app, "real-1", "?baseline=true", &foreign_record(seed, false)).await;
+        let (s, d) = post_record(
+            &app,
+            "real-1",
+            "?baseline=true",
+            &foreign_record(seed, false),
+        )
+        .await;
         assert_eq!(s, 201, "{d}");
         assert_eq!(d["baseline"]["this_record"], true);
     }
@@ -237,12 +296,22 @@ async fn a_baseline_makes_a_machine_the_model_does_not_fit_judgeable(b: Backend)
     let n = &d["novelty"];
     assert_eq!(n["baseline_records"], 3, "{d}");
     assert_eq!(n["anomalous"], false, "a healthy record flagged: {d}");
-    assert_eq!((d["alert_level"].as_str(), d["alert"]["basis"].as_str()), (Some("ok"), Some("novelty")), "{d}");
+    assert_eq!(
+        (d["alert_level"].as_str(), d["alert"]["basis"].as_str()),
+        (Some("ok"), Some("novelty")),
+        "{d}"
+    );
 
     let (s, d) = post_record(&app, "real-1", "", &foreign_record(6, true)).await;
     assert_eq!(s, 201, "{d}");
-    assert_eq!(d["novelty"]["anomalous"], true, "a broken tooth not flagged: {d}");
-    assert!(matches!(d["alert_level"].as_str(), Some("warning" | "alarm")), "{d}");
+    assert_eq!(
+        d["novelty"]["anomalous"], true,
+        "a broken tooth not flagged: {d}"
+    );
+    assert!(
+        matches!(d["alert_level"].as_str(), Some("warning" | "alarm")),
+        "{d}"
+    );
     assert!(!d["novelty"]["top_features"].as_array().unwrap().is_empty());
 
     // The machine view: its baseline, novelty over time.
@@ -261,11 +330,26 @@ async fn a_baseline_makes_a_machine_the_model_does_not_fit_judgeable(b: Backend)
             .bearer_auth(key)
             .json(&json!({"record_ids": ids}))
     };
-    let (s, _, _) = checked(mark(json!([first_record]), app.ingest_key.clone()), "POST", "/v1/machines/{machine_id}/baseline").await;
+    let (s, _, _) = checked(
+        mark(json!([first_record]), app.ingest_key.clone()),
+        "POST",
+        "/v1/machines/{machine_id}/baseline",
+    )
+    .await;
     assert_eq!(s, 403);
-    let (s, _, body) = checked(mark(json!(["no-such-record"]), app.admin_key.clone()), "POST", "/v1/machines/{machine_id}/baseline").await;
+    let (s, _, body) = checked(
+        mark(json!(["no-such-record"]), app.admin_key.clone()),
+        "POST",
+        "/v1/machines/{machine_id}/baseline",
+    )
+    .await;
     assert_eq!(s, 422, "{}", String::from_utf8_lossy(&body));
-    let (s, _, body) = checked(mark(json!([first_record]), app.admin_key.clone()), "POST", "/v1/machines/{machine_id}/baseline").await;
+    let (s, _, body) = checked(
+        mark(json!([first_record]), app.admin_key.clone()),
+        "POST",
+        "/v1/machines/{machine_id}/baseline",
+    )
+    .await;
     assert_eq!(s, 200, "{}", String::from_utf8_lossy(&body));
     assert_eq!(json(&body)["count"], 4);
     let (s, _, _) = checked(
@@ -277,17 +361,28 @@ async fn a_baseline_makes_a_machine_the_model_does_not_fit_judgeable(b: Backend)
     )
     .await;
     assert_eq!(s, 204);
-    let bl = get_json(&app, "/v1/machines/real-1/baseline", "/v1/machines/{machine_id}/baseline").await;
+    let bl = get_json(
+        &app,
+        "/v1/machines/real-1/baseline",
+        "/v1/machines/{machine_id}/baseline",
+    )
+    .await;
     assert_eq!(bl["count"], 3);
     let (s, _, _) = checked(
-        app.client.delete(app.url("/v1/machines/real-1/baseline")).bearer_auth(&app.admin_key),
+        app.client
+            .delete(app.url("/v1/machines/real-1/baseline"))
+            .bearer_auth(&app.admin_key),
         "DELETE",
         "/v1/machines/{machine_id}/baseline",
     )
     .await;
     assert_eq!(s, 204);
     let (s, d) = post_record(&app, "real-1", "", &foreign_record(7, false)).await;
-    assert_eq!((s, d["alert_level"].as_str()), (201, Some("unknown")), "{d}");
+    assert_eq!(
+        (s, d["alert_level"].as_str()),
+        (201, Some("unknown")),
+        "{d}"
+    );
 }
 
 async fn a_table_job_interrupted_by_a_restart_resumes(b: Backend) {
@@ -311,4 +406,128 @@ async fn a_table_job_interrupted_by_a_restart_resumes(b: Backend) {
     app.restart(|_| {}).await;
     let g = wait_ready(&app, &id, Duration::from_secs(600)).await;
     assert!(g["attempts"].as_i64().unwrap() >= 2, "{g}");
+}
+
+/// A four-channel CSV (header a1..a4) of foreign records; channel a3 carries the broken tooth
+/// when `broken`.
+fn four_channel_csv(seed: u64, broken: bool) -> String {
+    let cols: Vec<Vec<f64>> = (0..4)
+        .map(|c| {
+            let r = foreign_record(seed * 10 + c, broken && c == 2);
+            r["samples"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_f64().unwrap() * (1.0 + 0.3 * c as f64))
+                .collect()
+        })
+        .collect();
+    let mut out = String::from("a1,a2,a3,a4\n");
+    for i in 0..cols[0].len() {
+        out.push_str(&format!(
+            "{},{},{},{}\n",
+            cols[0][i], cols[1][i], cols[2][i], cols[3][i]
+        ));
+    }
+    out
+}
+
+async fn every_channel_is_diagnosed_and_the_worst_decides(b: Backend) {
+    let Some(app) = spawn_app(b, |_| {}).await else {
+        return;
+    };
+    let post = |query: &str, csv: String| {
+        app.client
+            .post(app.url(&format!(
+                "/v1/machines/multi/records?sample_rate_hz=25600{query}"
+            )))
+            .bearer_auth(&app.ingest_key)
+            .header("content-type", "text/csv")
+            .body(csv)
+    };
+    // The four-column CSV that failed over HTTP ("choose one with --column") is diagnosed
+    // channel by channel; no error names a CLI flag.
+    let (s, _, body) = checked(
+        post("", four_channel_csv(1, false)),
+        "POST",
+        "/v1/machines/{machine_id}/records",
+    )
+    .await;
+    assert_eq!(s, 201, "{}", String::from_utf8_lossy(&body));
+    let d = json(&body);
+    let names: Vec<&str> = d["channels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["a1", "a2", "a3", "a4"]);
+    assert!(names.contains(&d["channel"].as_str().unwrap()));
+    let (s, _, body) = checked(
+        post("&channel=a9", four_channel_csv(1, false)),
+        "POST",
+        "/v1/machines/{machine_id}/records",
+    )
+    .await;
+    assert_eq!(s, 422);
+    let p = json(&body);
+    assert!(
+        p["detail"].as_str().unwrap().contains("a4")
+            && !p["detail"].as_str().unwrap().contains("--"),
+        "{p}"
+    );
+    let (s, _, body) = checked(
+        post("&channel=a2", four_channel_csv(2, false)),
+        "POST",
+        "/v1/machines/{machine_id}/records",
+    )
+    .await;
+    assert_eq!(s, 201);
+    let d = json(&body);
+    assert_eq!(d["channel"], "a2");
+    assert!(d.get("channels").is_none(), "one channel asked for: {d}");
+
+    // A baseline per channel; then the broken tooth on a3 decides.
+    for seed in 3..=5 {
+        let (s, _, _) = checked(
+            post("&baseline=true", four_channel_csv(seed, false)),
+            "POST",
+            "/v1/machines/{machine_id}/records",
+        )
+        .await;
+        assert_eq!(s, 201);
+    }
+    let bl = get_json(
+        &app,
+        "/v1/machines/multi/baseline",
+        "/v1/machines/{machine_id}/baseline",
+    )
+    .await;
+    assert_eq!(bl["channels"]["a1"]["records"], 3, "{bl}");
+    assert_eq!(bl["channels"]["a2"]["records"], 3, "{bl}");
+    let (s, _, body) = checked(
+        post("", four_channel_csv(6, true)),
+        "POST",
+        "/v1/machines/{machine_id}/records",
+    )
+    .await;
+    assert_eq!(s, 201);
+    let d = json(&body);
+    assert_eq!(d["channel"], "a3", "{}", d["channels"]);
+    assert!(
+        matches!(d["alert_level"].as_str(), Some("warning" | "alarm")),
+        "{d}"
+    );
+    for c in d["channels"].as_array().unwrap() {
+        if c["name"] != "a3" {
+            assert_eq!(c["alert_level"], "ok", "{c}");
+        }
+    }
+    // JSON channels too.
+    let r = foreign_record(9, false);
+    let body =
+        json!({"sample_rate_hz": 25600.0, "channels": {"a1": r["samples"], "a2": r["samples"]}});
+    let (s, d) = post_record(&app, "multi-json", "", &body).await;
+    assert_eq!(s, 201, "{d}");
+    assert_eq!(d["channels"].as_array().unwrap().len(), 2);
 }

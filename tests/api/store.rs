@@ -49,24 +49,55 @@ async fn a_table_job_is_claimed_once_and_taken_over_after_its_lease(b: Backend) 
         return;
     };
     let st = store::connect(&db.url).await.unwrap();
-    assert_eq!(st.put_gearbox(&gearbox("gb1", "h1")).await.unwrap(), PutOutcome::Created);
+    assert_eq!(
+        st.put_gearbox(&gearbox("gb1", "h1")).await.unwrap(),
+        PutOutcome::Created
+    );
     let (a, bb) = tokio::join!(
         st.claim_gearbox_job(100, 1_000, "A"),
         st.claim_gearbox_job(100, 1_000, "B")
     );
     let (a, bb) = (a.unwrap(), bb.unwrap());
-    assert!(a.is_some() != bb.is_some(), "exactly one replica claims the job");
+    assert!(
+        a.is_some() != bb.is_some(),
+        "exactly one replica claims the job"
+    );
     let (holder, other) = if a.is_some() { ("A", "B") } else { ("B", "A") };
     // Within the lease nobody else gets it; progress renews it.
-    assert!(st.claim_gearbox_job(900, 1_000, other).await.unwrap().is_none());
-    assert!(st.gearbox_progress("gb1", "h1", holder, 0.5, 2_000, 900).await.unwrap());
-    assert!(st.claim_gearbox_job(1_500, 1_000, other).await.unwrap().is_none());
+    assert!(
+        st.claim_gearbox_job(900, 1_000, other)
+            .await
+            .unwrap()
+            .is_none()
+    );
+    assert!(
+        st.gearbox_progress("gb1", "h1", holder, 0.5, 2_000, 900)
+            .await
+            .unwrap()
+    );
+    assert!(
+        st.claim_gearbox_job(1_500, 1_000, other)
+            .await
+            .unwrap()
+            .is_none()
+    );
     let g = st.get_gearbox("gb1").await.unwrap().unwrap();
     assert_eq!((g.status.as_str(), g.progress), ("running", 0.5));
     // The holder dies: after the lease the other takes the job over.
-    let took = st.claim_gearbox_job(2_001, 1_000, other).await.unwrap().unwrap();
-    assert_eq!((took.claimed_by.as_deref(), took.attempts), (Some(other), 2));
-    assert!(!st.gearbox_progress("gb1", "h1", holder, 0.9, 5_000, 2_100).await.unwrap());
+    let took = st
+        .claim_gearbox_job(2_001, 1_000, other)
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!(
+        (took.claimed_by.as_deref(), took.attempts),
+        (Some(other), 2)
+    );
+    assert!(
+        !st.gearbox_progress("gb1", "h1", holder, 0.9, 5_000, 2_100)
+            .await
+            .unwrap()
+    );
     assert!(
         !st.finish_gearbox_job("gb1", "h1", holder, Ok("late".into()), 2_200)
             .await
@@ -79,10 +110,18 @@ async fn a_table_job_is_claimed_once_and_taken_over_after_its_lease(b: Backend) 
     );
     let g = st.get_gearbox("gb1").await.unwrap().unwrap();
     assert_eq!((g.status.as_str(), g.progress), ("ready", 1.0));
-    assert_eq!(st.gearbox_table("gb1", "h1").await.unwrap().as_deref(), Some("{\"t\":1}"));
+    assert_eq!(
+        st.gearbox_table("gb1", "h1").await.unwrap().as_deref(),
+        Some("{\"t\":1}")
+    );
     assert!(st.gearbox_table("gb1", "other").await.unwrap().is_none());
     // A ready job is not claimed again.
-    assert!(st.claim_gearbox_job(99_999, 1_000, "C").await.unwrap().is_none());
+    assert!(
+        st.claim_gearbox_job(99_999, 1_000, "C")
+            .await
+            .unwrap()
+            .is_none()
+    );
     st.close().await;
 }
 
@@ -96,11 +135,23 @@ async fn a_gearbox_put_again_is_unchanged_and_a_new_description_requeues(b: Back
     st.finish_gearbox_job("gb2", "h1", "A", Err("boom".into()), 20)
         .await
         .unwrap();
-    assert_eq!(st.get_gearbox("gb2").await.unwrap().unwrap().status, "failed");
-    assert_eq!(st.put_gearbox(&gearbox("gb2", "h1")).await.unwrap(), PutOutcome::Unchanged);
-    assert_eq!(st.put_gearbox(&gearbox("gb2", "h2")).await.unwrap(), PutOutcome::Replaced);
+    assert_eq!(
+        st.get_gearbox("gb2").await.unwrap().unwrap().status,
+        "failed"
+    );
+    assert_eq!(
+        st.put_gearbox(&gearbox("gb2", "h1")).await.unwrap(),
+        PutOutcome::Unchanged
+    );
+    assert_eq!(
+        st.put_gearbox(&gearbox("gb2", "h2")).await.unwrap(),
+        PutOutcome::Replaced
+    );
     let g = st.get_gearbox("gb2").await.unwrap().unwrap();
-    assert_eq!((g.status.as_str(), g.hash.as_str(), g.error), ("queued", "h2", None));
+    assert_eq!(
+        (g.status.as_str(), g.hash.as_str(), g.error),
+        ("queued", "h2", None)
+    );
     // The built-in one cannot be replaced, and its job is never claimed.
     let mut bi = gearbox("builtin", "hb");
     bi.builtin = true;
@@ -129,7 +180,10 @@ async fn baseline_marks_touch_only_the_machine_s_records(b: Backend) {
     }
     assert_eq!(st.baseline_records("m1").await.unwrap().len(), 1);
     let ids = vec![r2.record.id.clone(), r3.record.id.clone()];
-    assert_eq!(st.machine_record_ids("m1", &ids).await.unwrap(), vec![r2.record.id.clone()]);
+    assert_eq!(
+        st.machine_record_ids("m1", &ids).await.unwrap(),
+        vec![r2.record.id.clone()]
+    );
     assert_eq!(st.set_baseline("m1", &ids, true, 10).await.unwrap(), 1);
     let b1 = st.baseline_records("m1").await.unwrap();
     assert_eq!(b1.len(), 2);
