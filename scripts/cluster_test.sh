@@ -19,7 +19,12 @@
 #               + its writer processes) and the load generator; then pgbench on the INSERT
 #               path alone (the database's own limit per record).
 #
-#   scripts/cluster_test.sh [1 2 3 4 5]          # default: all; 2 and 3 run together
+#   6 tablejob  a gearbox PUT through nginx: its table job runs on exactly one replica (the
+#               claim in the store); that replica is SIGKILLed mid-job and kept down: the
+#               other claims the job when its lease (30 s) has run out and finishes it; the
+#               table is stored once, by the replica that holds the job;
+#
+#   scripts/cluster_test.sh [1 2 3 4 5 6]        # default: all; 2 and 3 run together
 #
 # Environment: TRIALS [30], RECORDS [300], KILL_RECORDS [3000], KILLS [4], SCALE_SECONDS [20],
 # KEEP_WORK [unset: the work files — logs, receiver log, nginx access log — are removed
@@ -30,7 +35,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 tests=("$@")
-[ ${#tests[@]} -eq 0 ] && tests=(1 2 3 4 5)
+[ ${#tests[@]} -eq 0 ] && tests=(1 2 3 4 5 6)
 want() { local t; for t in "${tests[@]}"; do [ "$t" = "$1" ] && return 0; done; return 1; }
 
 TARGET=${CARGO_TARGET_DIR:-target}
@@ -482,6 +487,49 @@ print(f"  pgbench {sys.argv[5]} client(s): {sys.argv[6]} records/s ({sys.argv[7]
       f"writer processes {aux:.2f} s over the whole run (shared with other databases)")
 EOF
   done
+  stop_cluster
+fi
+
+# ---------------------------------------------------------------------------------------
+if want 6; then
+  say "== 6. a gearbox table job on one of 2 replicas, its replica SIGKILLed mid-job"
+  start_cluster 2 tablejob
+  admin=$(key admin)
+  curl -fsS -o /dev/null -H "Authorization: Bearer $admin" -H 'Content-Type: application/toml' \
+    --data-binary @configs/gearboxes/planetary-sun-in.toml -X PUT "$CLUSTER_URL/v1/gearboxes/tj"
+  holder=""
+  for _ in $(seq 300); do
+    holder=$(q "SELECT claimed_by FROM gearboxes WHERE id = 'tj' AND status = 'running'")
+    [ -n "$holder" ] && break
+    sleep 0.1
+  done
+  # The worker id is "pid<PID>-…": find the replica that runs it.
+  hpid=${holder#pid}; hpid=${hpid%%-*}
+  victim=""
+  for r in $(seq 1 "$CLUSTER_REPLICAS"); do
+    [ -f "$CLUSTER_DIR/replica-$r.pid" ] && [ "$(replica_pid "$r")" = "$hpid" ] && victim=$r
+  done
+  if [ -z "$victim" ]; then
+    check "the job is claimed by a replica" 1 "claimed_by '$holder' matches no replica pid"
+  else
+    sleep 2
+    p0=$(q "SELECT progress FROM gearboxes WHERE id = 'tj'")
+    touch "$CLUSTER_DIR/hold-$victim"
+    kill -9 "$hpid"
+    tkill=$(now)
+    say "  replica $victim (pid $hpid) held the job at progress $p0; SIGKILLed (kept down)"
+    for _ in $(seq 1200); do
+      [ "$(q "SELECT status FROM gearboxes WHERE id = 'tj'")" = ready ] && break
+      sleep 0.1
+    done
+    read -r status attempts by < <(q "SELECT status || ' ' || attempts || ' ' || COALESCE(claimed_by, '-') FROM gearboxes WHERE id = 'tj'")
+    took=$(since "$tkill")
+    check "taken over and finished by the other replica" \
+      "$([ "$status" = ready ] && [ "$attempts" = 2 ] && [ "$by" != "$holder" ] && echo 0 || echo 1)" \
+      "status $status after $took s, attempts $attempts, finished by $by (killed: $holder)"
+    ready=$(curl -fsS -H "Authorization: Bearer $admin" "$CLUSTER_URL/v1/gearboxes/tj" | python3 -c 'import json,sys; d=json.load(sys.stdin); print(d["status"], d["progress"])')
+    check "the API shows it ready" "$([ "$ready" = "ready 1.0" ] && echo 0 || echo 1)" "$ready"
+  fi
   stop_cluster
 fi
 

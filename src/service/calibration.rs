@@ -90,6 +90,7 @@ async fn calibrate(
     let format = body_format(headers)?;
     let q = parse_query(query.as_deref())?;
     let bytes = read_body(headers, body_in, limits.max_body_bytes).await?;
+    let bytes = super::records::content_decoded(headers, bytes, limits.max_body_bytes)?;
     let dec = decode(format, &q, &bytes, limits)?;
     let samples = dec.single(q.channel.as_deref())?.to_vec();
     let Decoded {

@@ -388,7 +388,9 @@ fn run_precompute(
 
 /// The background worker: claims table jobs and runs them one at a time.
 pub async fn worker(app: AppState, mut stop: watch::Receiver<bool>) {
-    let me = format!("replica-{}", new_id());
+    // The process id in the worker's name lets an operator (and scripts/cluster_test.sh) tell
+    // which replica holds a job.
+    let me = format!("pid{}-{}", std::process::id(), new_id());
     loop {
         if *stop.borrow() {
             break;

@@ -523,6 +523,26 @@ async fn every_channel_is_diagnosed_and_the_worst_decides(b: Backend) {
             assert_eq!(c["alert_level"], "ok", "{c}");
         }
     }
+    // A gzip-compressed body (Content-Encoding: gzip) is the same record.
+    let gz = {
+        use std::io::Write;
+        let mut e = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+        e.write_all(four_channel_csv(1, false).as_bytes()).unwrap();
+        e.finish().unwrap()
+    };
+    let (s, _, body) = checked(
+        app.client
+            .post(app.url("/v1/machines/multi-gz/records?sample_rate_hz=25600"))
+            .bearer_auth(&app.ingest_key)
+            .header("content-type", "text/csv")
+            .header("content-encoding", "gzip")
+            .body(gz),
+        "POST",
+        "/v1/machines/{machine_id}/records",
+    )
+    .await;
+    assert_eq!(s, 201, "{}", String::from_utf8_lossy(&body));
+    assert_eq!(json(&body)["channels"].as_array().unwrap().len(), 4);
     // JSON channels too.
     let r = foreign_record(9, false);
     let body =

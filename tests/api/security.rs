@@ -83,6 +83,30 @@ const TABLE: &[(&str, &str, Need)] = &[
         "/v1/diagnoses/{diagnosis_id}",
         Need::Key(Scope::Read),
     ),
+    ("PUT", "/v1/machines/{machine_id}", Need::Key(Scope::Admin)),
+    (
+        "GET",
+        "/v1/machines/{machine_id}/baseline",
+        Need::Key(Scope::Read),
+    ),
+    (
+        "POST",
+        "/v1/machines/{machine_id}/baseline",
+        Need::Key(Scope::Admin),
+    ),
+    (
+        "DELETE",
+        "/v1/machines/{machine_id}/baseline",
+        Need::Key(Scope::Admin),
+    ),
+    (
+        "DELETE",
+        "/v1/machines/{machine_id}/baseline/{record_id}",
+        Need::Key(Scope::Admin),
+    ),
+    ("GET", "/v1/gearboxes", Need::Key(Scope::Read)),
+    ("GET", "/v1/gearboxes/{gearbox_id}", Need::Key(Scope::Read)),
+    ("PUT", "/v1/gearboxes/{gearbox_id}", Need::Key(Scope::Admin)),
     ("POST", "/v1/webhooks", Need::Key(Scope::Admin)),
     ("GET", "/v1/webhooks", Need::Key(Scope::Admin)),
     (
@@ -143,18 +167,25 @@ struct Fixture {
     machine: String,
     diagnosis: String,
     webhook: String,
+    record: String,
 }
 
 impl Fixture {
     /// A machine with a diagnosis and a calibration, and a webhook.
     async fn new(app: &TestApp) -> Fixture {
         let machine = "m-sec".to_string();
-        let r = app.post_json(&machine, &json_record(11)).await;
+        let r = app
+            .client
+            .post(app.url(&format!("/v1/machines/{machine}/records?baseline=true")))
+            .bearer_auth(&app.ingest_key)
+            .json(&json_record(11))
+            .send()
+            .await
+            .unwrap();
         assert_eq!(r.status(), 201);
-        let diagnosis = json(&r.bytes().await.unwrap())["id"]
-            .as_str()
-            .unwrap()
-            .to_string();
+        let d = json(&r.bytes().await.unwrap());
+        let diagnosis = d["id"].as_str().unwrap().to_string();
+        let record = d["record_id"].as_str().unwrap().to_string();
         // A calibration row, so that a refused DELETE has something to (not) delete. Written
         // to the store directly: a real calibration runs simulations for a minute.
         app.store
@@ -175,6 +206,7 @@ impl Fixture {
             machine,
             diagnosis,
             webhook,
+            record,
         }
     }
 
@@ -183,6 +215,8 @@ impl Fixture {
             .replace("{machine_id}", &self.machine)
             .replace("{diagnosis_id}", &self.diagnosis)
             .replace("{webhook_id}", &self.webhook)
+            .replace("{record_id}", &self.record)
+            .replace("{gearbox_id}", "sec-gearbox")
     }
 }
 
@@ -212,6 +246,19 @@ fn request(
             .client
             .post(url)
             .json(&json!({"url": "http://127.0.0.1:9/matrix", "events": ["diagnosis.created"]})),
+        ("PUT", "/v1/machines/{machine_id}") => app
+            .client
+            .put(url)
+            .json(&json!({"gearbox": "wang2019", "input_shaft_hz": 31.0})),
+        ("POST", "/v1/machines/{machine_id}/baseline") => app
+            .client
+            .post(url)
+            .json(&json!({"record_ids": ["no-such-record"]})),
+        ("PUT", "/v1/gearboxes/{gearbox_id}") => app
+            .client
+            .put(url)
+            .header("content-type", "application/toml")
+            .body(include_str!("../../configs/gearboxes/spur-pair.toml")),
         ("GET", _) => app.client.get(url),
         ("DELETE", _) => app.client.delete(url),
         (m, t) => panic!("no request written for {m} {t}: add one to `request`"),
@@ -224,6 +271,9 @@ struct Snapshot {
     records: i64,
     webhooks: Vec<String>,
     calibrated: bool,
+    gearboxes: usize,
+    baseline: usize,
+    machine_gearbox: Option<(Option<String>, Option<f64>)>,
 }
 
 async fn snapshot(app: &TestApp, machine: &str) -> Snapshot {
@@ -245,10 +295,21 @@ async fn snapshot(app: &TestApp, machine: &str) -> Snapshot {
         .collect();
     webhooks.sort();
     let calibrated = app.store.get_calibration(machine).await.unwrap().is_some();
+    let gearboxes = app.store.list_gearboxes().await.unwrap().len();
+    let baseline = app.store.baseline_records(machine).await.unwrap().len();
+    let machine_gearbox = app
+        .store
+        .get_machine(machine)
+        .await
+        .unwrap()
+        .map(|m| (m.gearbox_id, m.input_shaft_hz));
     Snapshot {
         records,
         webhooks,
         calibrated,
+        gearboxes,
+        baseline,
+        machine_gearbox,
     }
 }
 
