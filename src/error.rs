@@ -132,6 +132,12 @@ pub enum Error {
         table_hash: String,
         model_hash: String,
     },
+    /// A machine baseline needs more healthy records.
+    #[error(
+        "a baseline needs at least {needed} healthy records of the machine; {records} given \
+         (add records known to be healthy)"
+    )]
+    BaselineTooSmall { records: usize, needed: usize },
 }
 
 impl Error {
