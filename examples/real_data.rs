@@ -164,6 +164,13 @@ fn main() {
                     .flat_map(feats)
                     .collect();
                 let b = MachineBaseline::fit(&base).expect("baseline");
+                eprintln!(
+                    "{ch} {label} load {l}: leave-one-file-out scores {:?}",
+                    b.loo_scores
+                        .iter()
+                        .map(|s| (s * 100.0).round() / 100.0)
+                        .collect::<Vec<_>>()
+                );
                 let score = |healthy: bool| -> (Vec<f64>, Vec<bool>, Vec<String>) {
                     let d = data
                         .iter()
