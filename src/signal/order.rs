@@ -7,9 +7,11 @@
 //! the shaft carrying the `z`-tooth gear. Its instantaneous phase, divided by `z`, is that
 //! shaft's angle. Two passes:
 //!
-//! 1. **Ridge.** The strongest line within `±search` (relative) of the hint or of its 2nd or
-//!    3rd harmonic (whichever is strongest) is the tracked mesh line, found in the whole-record
-//!    Hann spectrum; its phase advances `h z` cycles per revolution. Short-time spectra (Hann segments of 4 nominal
+//! 1. **Ridge.** In the whole-record Hann spectrum, the strongest bin within `±search`
+//!    (relative) of each of the hint's first three harmonics proposes a fundamental; the
+//!    proposal whose multiples carry the most amplitude wins, and its strongest multiple `h` is
+//!    the tracked line (on a housing the fundamental is often not the strongest mesh line); its
+//!    phase advances `h z` cycles per revolution. Short-time spectra (Hann segments of 4 nominal
 //!    revolutions, half overlap, zero-padded ×4, parabolic interpolation of the log magnitude)
 //!    follow it; a polynomial of degree ≤ 3 in time, fitted by least squares with one round of
 //!    outlier rejection (> 0.25 shaft orders off), is the coarse mesh frequency `f_A(t)`, and
@@ -276,26 +278,49 @@ pub fn track_mesh_phase(
 
     // Pass 1: the strongest mesh harmonic in the whole record, then its ridge.
     let spec = amplitude_spectrum(&xc, fs, Window::Hann)?;
-    let mut best: Option<(f64, f64, f64)> = None; // (amplitude, frequency, harmonic)
-    for h in 1..=opts.harmonics.max(1) {
+    // Each harmonic band's strongest bin proposes a fundamental; the proposal whose multiples
+    // carry the most amplitude wins (a shaft-order sideband stronger than its mesh harmonic
+    // proposes a fundamental whose other multiples miss the mesh harmonics). Then the strongest
+    // multiple of that fundamental is tracked.
+    let df = spec.resolution();
+    let nyq = 0.5 * fs;
+    let hmax = (1..=opts.harmonics.max(1))
+        .take_while(|&h| h as f64 * mesh_hz_hint * (1.0 + opts.search) < nyq)
+        .last()
+        .unwrap_or(0);
+    let amp_at = |f: f64| spec.peak_near(f, 1.5 * df);
+    let mut best: Option<(f64, f64)> = None; // (harmonic-sum, fundamental)
+    for h in 1..=hmax {
         let c = h as f64 * mesh_hz_hint;
-        if c * (1.0 + opts.search) >= 0.5 * fs {
-            break;
+        let (f, _) = spec.peak_near(c, c * opts.search);
+        if !f.is_finite() {
+            continue;
         }
-        let (f, a) = spec.peak_near(c, c * opts.search);
-        if f.is_finite() && best.is_none_or(|b| a > b.0) {
-            best = Some((a, f, h as f64));
+        let fund = f / h as f64;
+        let sum: f64 = (1..=hmax)
+            .map(|k| amp_at(k as f64 * fund).1)
+            .filter(|a| a.is_finite())
+            .sum();
+        if best.is_none_or(|b| sum > b.0) {
+            best = Some((sum, fund));
         }
     }
-    let Some((_, fm0, harmonic)) = best else {
+    let Some((_, fund)) = best else {
         return Err(Error::Signal(format!(
             "no spectrum bin within ±{} % of {mesh_hz_hint:.1} Hz to track a mesh line in",
             100.0 * opts.search
         )));
     };
+    let (mut fm0, mut harmonic, mut top) = (fund, 1.0, f64::NEG_INFINITY);
+    for k in 1..=hmax {
+        let (f, a) = amp_at(k as f64 * fund);
+        if f.is_finite() && a > top {
+            (fm0, harmonic, top) = (f, k as f64, a);
+        }
+    }
     let mesh_order = harmonic * fund_order;
-    let lo = harmonic * mesh_hz_hint * (1.0 - opts.search);
-    let hi = harmonic * mesh_hz_hint * (1.0 + opts.search);
+    let lo = fm0 * (1.0 - opts.search);
+    let hi = fm0 * (1.0 + opts.search);
     let shaft_a = fm0 / mesh_order;
     let seg = ((4.0 * fs / shaft_a).round() as usize).clamp(64, n);
     let hop = (seg / 2).max(1);
