@@ -26,7 +26,9 @@ use std::path::{Path, PathBuf};
 
 use gearwear::diagnosis::{DiagnoseOptions, diagnose};
 use gearwear::gearbox::Gearbox;
-use gearwear::novelty::{MachineBaseline, RecordFeatures, order_analysis, record_features, split_record};
+use gearwear::novelty::{
+    MachineBaseline, RecordFeatures, order_analysis, record_features, split_record,
+};
 use gearwear::record::{Column, ReadOptions, Record, read_record};
 use gearwear::signature::SignatureTable;
 use rayon::prelude::*;
@@ -93,7 +95,8 @@ fn main() {
     }
     let gb = Gearbox::from_file(&manifest("configs/gearboxes/spectraquest-gfd.toml"))
         .expect("description");
-    let paper_table = SignatureTable::load(&manifest("signatures/model_a_accel.json")).expect("table");
+    let paper_table =
+        SignatureTable::load(&manifest("signatures/model_a_accel.json")).expect("table");
     let sq_table = SignatureTable::load(&manifest("signatures/spectraquest-gfd.json")).ok();
     println!(
         "# SpectraQuest records, {segments} segments per file, baseline = healthy segments of the other loads\n"
@@ -148,7 +151,13 @@ fn main() {
             ("with the description", true),
             ("without a description", false),
         ] {
-            let feats = |d: &FileData| if pick { d.with.clone() } else { d.without.clone() };
+            let feats = |d: &FileData| {
+                if pick {
+                    d.with.clone()
+                } else {
+                    d.without.clone()
+                }
+            };
             println!("### Novelty, {label}\n");
             println!(
                 "| load | threshold | healthy segment scores | broken segment scores | healthy file | broken file | top features of the broken file |"
@@ -230,7 +239,9 @@ fn main() {
         println!(
             "| file | wear (paper table) | χ²/feature | wear (described table) | χ²/feature | input FM0 | FM4 | NA4 | NB4 | M6A | M8A | ER | SLF | output FM4 | NA4 | SLF |"
         );
-        println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+        println!(
+            "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+        );
         let rows: Vec<String> = data
             .par_iter()
             .map(|d| {
@@ -278,7 +289,9 @@ fn main() {
         println!();
     }
     println!("## Summary\n");
-    println!("| channel | features | AUC | false alarms (segments) | misses (segments) | false alarms (files) | misses (files) |");
+    println!(
+        "| channel | features | AUC | false alarms (segments) | misses (segments) | false alarms (files) | misses (files) |"
+    );
     println!("| --- | --- | --- | --- | --- | --- | --- |");
     for s in summary {
         println!("{s}");

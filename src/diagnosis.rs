@@ -970,10 +970,12 @@ pub fn diagnose_with_spectrum(
     let x = inp.x;
     let fs = inp.fs;
     // The f1 found above is precise: the tracker searches its line within ±1 %.
-    let (order, order_error) = match crate::novelty::order_analysis(x, fs, inp.gb, f1, 0.01) {
-        Ok(a) => (Some(a), None),
-        Err(e) => (None, Some(e.to_string())),
-    };
+    let spectrum = spectrum.into_whole();
+    let (order, order_error) =
+        match crate::novelty::order_analysis_with(x, fs, inp.gb, f1, 0.01, spectrum.as_ref()) {
+            Ok(a) => (Some(a), None),
+            Err(e) => (None, Some(e.to_string())),
+        };
     let diagnosis = Diagnosis {
         wear_degree: wear,
         f1_hz: f1,
@@ -1010,7 +1012,7 @@ pub fn diagnose_with_spectrum(
         order,
         order_error,
     };
-    Ok((diagnosis, spectrum.into_whole()))
+    Ok((diagnosis, spectrum))
 }
 
 /// The record and the table's facts that the steps of [`diagnose_with_spectrum`] share.

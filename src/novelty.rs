@@ -64,9 +64,9 @@ use serde::{Deserialize, Serialize};
 use crate::gearbox::Gearbox;
 use crate::record::Record;
 use crate::signal::order::{
-    MeshTrackOptions, TrackSummary, angular_resample, samples_per_rev_for, track_mesh_phase,
+    MeshTrackOptions, TrackSummary, angular_resample, samples_per_rev_for, track_mesh_phase_with,
 };
-use crate::signal::tsa::{GearMetrics, gear_metrics, tsa};
+use crate::signal::tsa::{GearMetrics, gear_metrics_and_signals, tsa};
 use crate::signal::{Window, kurtosis, welch};
 use crate::{Error, Result};
 
@@ -140,7 +140,7 @@ pub struct OrderAnalysis {
 /// Track the input shaft from the stage-1 mesh line near `mesh_hz_hint` (searched within
 /// `± search`, relative) and compute the TSA and its metrics for every shaft of `gb`.
 ///
-/// Errors: the tracking's ([`track_mesh_phase`]); every shaft skipped is not an error.
+/// Errors: the tracking's ([`crate::signal::order::track_mesh_phase`]); every shaft skipped is not an error.
 pub fn order_analysis(
     x: &[f64],
     fs: f64,
@@ -148,8 +148,21 @@ pub fn order_analysis(
     mesh_hz_hint: f64,
     search: f64,
 ) -> Result<OrderAnalysis> {
+    order_analysis_with(x, fs, gb, mesh_hz_hint, search, None)
+}
+
+/// [`order_analysis`] reusing the record's whole-record Hann amplitude spectrum if at hand
+/// ([`crate::signal::order::track_mesh_phase_with`]).
+pub fn order_analysis_with(
+    x: &[f64],
+    fs: f64,
+    gb: &Gearbox,
+    mesh_hz_hint: f64,
+    search: f64,
+    spectrum: Option<&crate::signal::Spectrum>,
+) -> Result<OrderAnalysis> {
     let z_in = gb.f1_hz(1.0);
-    let angle = track_mesh_phase(
+    let angle = track_mesh_phase_with(
         x,
         fs,
         mesh_hz_hint,
@@ -158,6 +171,7 @@ pub fn order_analysis(
             search,
             ..Default::default()
         },
+        spectrum,
     )?;
     let kin = gb.kinematics(1.0);
     let input = kin.input_shaft.clone();
@@ -202,7 +216,7 @@ pub fn order_analysis(
             ));
             continue;
         }
-        orders.retain(|&z| z + 1 <= p / 2);
+        orders.retain(|&z| z < p / 2);
         if orders.is_empty() {
             skipped.push((
                 name.clone(),
@@ -212,7 +226,7 @@ pub fn order_analysis(
         }
         let res = angular_resample(x, &angle, ratio, p)?;
         let avg = tsa(&res.samples, p)?;
-        let metrics = gear_metrics(&avg, &orders)?;
+        let (metrics, signals) = gear_metrics_and_signals(&avg, &orders)?;
         if *name == input {
             let r_all = {
                 let m = res.samples.iter().sum::<f64>() / res.samples.len() as f64;
@@ -222,7 +236,7 @@ pub fn order_analysis(
             };
             sync_share = metrics.rms / r_all;
         }
-        let amps = crate::signal::tsa::tsa_signals(&avg, &orders)?.order_amplitudes;
+        let amps = signals.order_amplitudes;
         let z = metrics.mesh_order;
         let mut lines = Vec::new();
         for k in 1..=3 {
@@ -334,8 +348,7 @@ fn order_features(a: &OrderAnalysis, out: &mut BTreeMap<String, f64>) {
         let amp = |o: usize| s.mesh_lines.iter().find(|l| l.0 == o).map(|l| l.1);
         let z = m.mesh_order;
         for k in 1..=3 {
-            let (Some(lo), Some(c), Some(hi)) = (amp(k * z - 1), amp(k * z), amp(k * z + 1))
-            else {
+            let (Some(lo), Some(c), Some(hi)) = (amp(k * z - 1), amp(k * z), amp(k * z + 1)) else {
                 continue;
             };
             if m.rms > 0.0 {
@@ -495,7 +508,11 @@ fn feature_stats(records: &[&RecordFeatures]) -> BTreeMap<String, FeatureStats> 
         let g = r.group.clone().unwrap_or_else(|| format!("#{i}"));
         for (k, v) in &r.values {
             if v.is_finite() {
-                by.entry(k).or_default().entry(g.clone()).or_default().push(*v);
+                by.entry(k)
+                    .or_default()
+                    .entry(g.clone())
+                    .or_default()
+                    .push(*v);
             }
         }
     }
@@ -520,7 +537,10 @@ fn feature_stats(records: &[&RecordFeatures]) -> BTreeMap<String, FeatureStats> 
 }
 
 /// Sorted |z| list and the score of `f` against `stats`.
-fn score_against(stats: &BTreeMap<String, FeatureStats>, f: &RecordFeatures) -> (f64, Vec<FeatureZ>) {
+fn score_against(
+    stats: &BTreeMap<String, FeatureStats>,
+    f: &RecordFeatures,
+) -> (f64, Vec<FeatureZ>) {
     let mut zs: Vec<FeatureZ> = f
         .values
         .iter()
@@ -528,10 +548,7 @@ fn score_against(stats: &BTreeMap<String, FeatureStats>, f: &RecordFeatures) -> 
         .filter_map(|(k, v)| {
             let s = stats.get(k)?;
             let z = ((v - s.location) / s.scale).clamp(-1e6, 1e6);
-            z.is_finite().then(|| FeatureZ {
-                name: k.clone(),
-                z,
-            })
+            z.is_finite().then(|| FeatureZ { name: k.clone(), z })
         })
         .collect();
     zs.sort_by(|a, b| b.z.abs().total_cmp(&a.z.abs()));
@@ -558,11 +575,9 @@ impl MachineBaseline {
         let all: Vec<&RecordFeatures> = records.iter().collect();
         let features = feature_stats(&all);
         // Leave-one-out units: the groups, unless there are fewer than three of them.
-        let groups: BTreeSet<&str> = records
-            .iter()
-            .filter_map(|r| r.group.as_deref())
-            .collect();
-        let grouped = groups.len() >= MIN_BASELINE_RECORDS && records.iter().all(|r| r.group.is_some());
+        let groups: BTreeSet<&str> = records.iter().filter_map(|r| r.group.as_deref()).collect();
+        let grouped =
+            groups.len() >= MIN_BASELINE_RECORDS && records.iter().all(|r| r.group.is_some());
         let unit_of = |i: usize| -> String {
             if grouped {
                 records[i].group.clone().unwrap_or_default()
@@ -639,7 +654,13 @@ mod tests {
         let e = MachineBaseline::fit(&[feats(&[("a", 1.0)]), feats(&[("a", 1.1)])]).unwrap_err();
         let s = e.to_string();
         assert!(s.contains("2") && s.contains("3"), "{s}");
-        assert!(matches!(e, Error::BaselineTooSmall { records: 2, needed: 3 }));
+        assert!(matches!(
+            e,
+            Error::BaselineTooSmall {
+                records: 2,
+                needed: 3
+            }
+        ));
     }
 
     /// Scale floor, missing features, NaN: the score stays finite and ignores what is missing.
@@ -669,7 +690,10 @@ mod tests {
         let nv = b.score(&feats(&[("zz", 1.0)]));
         assert_eq!((nv.score, nv.anomalous, nv.features_used), (0.0, false, 0));
         // A healthy-looking record is not anomalous.
-        assert!(!b.score(&feats(&[("a", 1.0), ("b", 2.02), ("c", 0.5)])).anomalous);
+        assert!(
+            !b.score(&feats(&[("a", 1.0), ("b", 2.02), ("c", 0.5)]))
+                .anomalous
+        );
     }
 
     /// Gaussian features: the calibrated threshold keeps the false-alarm rate on new healthy
@@ -705,9 +729,19 @@ mod tests {
         let base: Vec<RecordFeatures> = (0..12).map(|_| rec(0.0)).collect();
         let b = MachineBaseline::fit(&base).unwrap();
         let alarms = (0..500).filter(|_| b.score(&rec(0.0)).anomalous).count();
-        assert!(alarms <= 500 / 13, "{alarms} false alarms of 500 (threshold {})", b.threshold);
-        let hits = (0..100).filter(|_| b.score(&rec(6.0 * 0.3)).anomalous).count();
-        assert!(hits >= 80, "{hits} of 100 detected (threshold {})", b.threshold);
+        assert!(
+            alarms <= 500 / 13,
+            "{alarms} false alarms of 500 (threshold {})",
+            b.threshold
+        );
+        let hits = (0..100)
+            .filter(|_| b.score(&rec(6.0 * 0.3)).anomalous)
+            .count();
+        assert!(
+            hits >= 80,
+            "{hits} of 100 detected (threshold {})",
+            b.threshold
+        );
     }
 
     #[test]

@@ -373,7 +373,10 @@ fn diagnose_with_a_baseline_scores_novelty() {
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     let n = &v["novelty"];
     assert_eq!(n["baseline_records"], 3, "{n}");
-    let (score, thr) = (n["score"].as_f64().unwrap(), n["threshold"].as_f64().unwrap());
+    let (score, thr) = (
+        n["score"].as_f64().unwrap(),
+        n["threshold"].as_f64().unwrap(),
+    );
     assert!(score.is_finite() && score >= 0.0 && thr >= 3.0, "{n}");
     assert_eq!(n["anomalous"].as_bool().unwrap(), score > thr);
     assert!(!n["top_features"].as_array().unwrap().is_empty(), "{n}");

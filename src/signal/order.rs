@@ -11,8 +11,9 @@
 //!    (relative) of each of the hint's first three harmonics proposes a fundamental; the
 //!    proposal whose multiples carry the most amplitude wins, and its strongest multiple `h` is
 //!    the tracked line (on a housing the fundamental is often not the strongest mesh line); its
-//!    phase advances `h z` cycles per revolution. Short-time spectra (Hann segments of 4 nominal
-//!    revolutions, half overlap, zero-padded ×4, parabolic interpolation of the log magnitude)
+//!    phase advances `h z` cycles per revolution. Short-time spectra (Hann segments of 8 nominal
+//!    revolutions, no overlap, zero-padded to a power of two ≥ 2×, parabolic interpolation of
+//!    the log magnitude)
 //!    follow it; a polynomial of degree ≤ 3 in time, fitted by least squares with one round of
 //!    outlier rejection (> 0.25 shaft orders off), is the coarse mesh frequency `f_A(t)`, and
 //!    its integral the coarse phase `φ_A(t)` (cycles).
@@ -47,7 +48,7 @@ use rustfft::{Fft, FftPlanner};
 use serde::{Deserialize, Serialize};
 
 use super::window::{Window, shared_window};
-use super::{PlanCache, amplitude_spectrum, check_rate, check_samples};
+use super::{PlanCache, Spectrum, amplitude_spectrum, check_rate, check_samples};
 use crate::{Error, Result};
 
 /// Revolutions of the tracked shaft left out at each end of a mesh-phase track (the circular
@@ -68,6 +69,25 @@ pub(crate) fn complex_plan(n: usize, inverse: bool) -> Arc<dyn Fft<f64>> {
     } else {
         p.plan_fft_forward(n)
     }
+}
+
+/// The smallest `2^a 3^b 5^c ≥ n` (an FFT length RustFFT handles fast).
+pub(crate) fn fast_len(n: usize) -> usize {
+    let mut best = n.next_power_of_two();
+    let mut p5 = 1;
+    while p5 < best {
+        let mut p35 = p5;
+        while p35 < best {
+            let mut m = p35;
+            while m < n {
+                m *= 2;
+            }
+            best = best.min(m);
+            p35 *= 3;
+        }
+        p5 *= 5;
+    }
+    best
 }
 
 /// How a shaft angle was obtained.
@@ -242,6 +262,20 @@ pub fn track_mesh_phase(
     mesh_order: f64,
     opts: &MeshTrackOptions,
 ) -> Result<ShaftAngle> {
+    track_mesh_phase_with(x, fs, mesh_hz_hint, mesh_order, opts, None)
+}
+
+/// [`track_mesh_phase`] with the record's whole-record Hann [`amplitude_spectrum`] already at
+/// hand (the diagnosis computes it for its f1 search); `None`: computed here. A spectrum of
+/// another length than the record's is ignored.
+pub fn track_mesh_phase_with(
+    x: &[f64],
+    fs: f64,
+    mesh_hz_hint: f64,
+    mesh_order: f64,
+    opts: &MeshTrackOptions,
+    spectrum: Option<&Spectrum>,
+) -> Result<ShaftAngle> {
     check_rate(fs)?;
     check_samples(x)?;
     if !(mesh_order.is_finite() && mesh_order > 0.0) {
@@ -251,7 +285,9 @@ pub fn track_mesh_phase(
             "the tracked gear's tooth count must be a positive number",
         ));
     }
-    if !(mesh_hz_hint.is_finite() && mesh_hz_hint > 0.0 && mesh_hz_hint * (1.0 + opts.search) < 0.5 * fs)
+    if !(mesh_hz_hint.is_finite()
+        && mesh_hz_hint > 0.0
+        && mesh_hz_hint * (1.0 + opts.search) < 0.5 * fs)
     {
         return Err(Error::param(
             "mesh_hz_hint",
@@ -277,7 +313,14 @@ pub fn track_mesh_phase(
     let xc: Vec<f64> = x.iter().map(|v| v - mean).collect();
 
     // Pass 1: the strongest mesh harmonic in the whole record, then its ridge.
-    let spec = amplitude_spectrum(&xc, fs, Window::Hann)?;
+    let own;
+    let spec = match spectrum.filter(|s| s.amplitude.len() == n / 2 + 1) {
+        Some(s) => s,
+        None => {
+            own = amplitude_spectrum(&xc, fs, Window::Hann)?;
+            &own
+        }
+    };
     // Each harmonic band's strongest bin proposes a fundamental; the proposal whose multiples
     // carry the most amplitude wins (a shaft-order sideband stronger than its mesh harmonic
     // proposes a fundamental whose other multiples miss the mesh harmonics). Then the strongest
@@ -322,9 +365,11 @@ pub fn track_mesh_phase(
     let lo = fm0 * (1.0 - opts.search);
     let hi = fm0 * (1.0 + opts.search);
     let shaft_a = fm0 / mesh_order;
-    let seg = ((4.0 * fs / shaft_a).round() as usize).clamp(64, n);
-    let hop = (seg / 2).max(1);
-    let nfft = 4 * seg;
+    let seg = ((8.0 * fs / shaft_a).round() as usize).clamp(64, n);
+    let hop = seg;
+    // A power of two: a segment of 8 revolutions is any length (often a prime), whose FFT
+    // would cost many times more.
+    let nfft = (2 * seg).next_power_of_two();
     let w = shared_window(Window::Hann, seg);
     let half = 0.5 * n as f64 / fs;
     let (mut ts, mut fs_) = (Vec::new(), Vec::new());
@@ -365,50 +410,86 @@ pub fn track_mesh_phase(
         half * acc
     };
 
-    // Pass 2: demodulate, low-pass, unwrap.
-    let mut buf: Vec<Complex64> = Vec::with_capacity(n);
+    // Pass 2: demodulate, low-pass, unwrap. The FFT runs on a fast length (2^a 3^b 5^c ≥ n,
+    // zero-padded): the padding's transient falls in the discarded end revolutions.
+    let m = fast_len(n);
+    let mut buf: Vec<Complex64> = Vec::with_capacity(m);
+    // φ_A is evaluated exactly every BLOCK samples and linearly in between (the phase actually
+    // used, kept in `phi_a`, so that φ_A + ψ stays exact); the phasor steps by a constant
+    // rotation inside a block: two `sin_cos` a block instead of one a sample.
+    const BLOCK: usize = 32;
     let mut phi_a = Vec::with_capacity(n);
-    for (i, &v) in xc.iter().enumerate() {
-        let tau = (i as f64 / fs - half) / half;
-        let ph = phase_a(tau);
-        phi_a.push(ph);
-        let (s, c) = (ph.fract() * std::f64::consts::TAU).sin_cos();
-        buf.push(Complex64::new(v * c, -v * s));
+    let tau_at = |i: usize| (i as f64 / fs - half) / half;
+    let mut b0 = 0;
+    while b0 < n {
+        let b1 = (b0 + BLOCK).min(n);
+        let (p0, p1) = (phase_a(tau_at(b0)), phase_a(tau_at(b1)));
+        let dphi = (p1 - p0) / (b1 - b0) as f64;
+        let (s0, c0) = (-p0.fract() * std::f64::consts::TAU).sin_cos();
+        let (ds, dc) = (-dphi * std::f64::consts::TAU).sin_cos();
+        let (mut zc, mut zs) = (c0, s0);
+        for i in b0..b1 {
+            let v = xc[i];
+            buf.push(Complex64::new(v * zc, v * zs));
+            phi_a.push(p0 + dphi * (i - b0) as f64);
+            let c = zc * dc - zs * ds;
+            zs = zc * ds + zs * dc;
+            zc = c;
+        }
+        b0 = b1;
     }
-    complex_plan(n, false).process(&mut buf);
-    let bw = ((LOWPASS_ORDERS * shaft_a) * n as f64 / fs).floor() as usize;
+    buf.resize(m, Complex64::new(0.0, 0.0));
+    complex_plan(m, false).process(&mut buf);
+    let bw = ((LOWPASS_ORDERS * shaft_a) * m as f64 / fs).floor() as usize;
     for (k, c) in buf.iter_mut().enumerate() {
-        if k > bw && k < n - bw {
+        if k > bw && k < m - bw {
             *c = Complex64::new(0.0, 0.0);
         }
     }
-    complex_plan(n, true).process(&mut buf);
-    let mags: Vec<f64> = buf.iter().map(|c| c.norm()).collect();
+    // The low-passed signal is band-limited to ±bw bins: its inverse transform at a short
+    // length `l` (≥ 16 bw) samples it densely enough to interpolate its unwrapped phase back to
+    // every sample (Keys cubic), at a fraction of a record-length inverse FFT.
+    let l = fast_len((16 * bw).max(64)).min(m);
+    let mut small = vec![Complex64::new(0.0, 0.0); l];
+    for k in 0..=bw.min(l / 2) {
+        small[k] = buf[k];
+        if k > 0 {
+            small[l - k] = buf[m - k];
+        }
+    }
+    complex_plan(l, true).process(&mut small);
+    // Decimated samples that fall inside the record.
+    let step = m as f64 / l as f64;
+    let nd = (((n - 1) as f64 / step).floor() as usize + 2).min(l);
+    let mags: Vec<f64> = small[..nd].iter().map(|c| c.norm()).collect();
     let mut sorted = mags.clone();
     let mid = sorted.len() / 2;
     sorted.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
     let med = sorted[mid];
-    let weak = mags.iter().filter(|&&m| m < 0.1 * med).count();
-    if !(med > 0.0) || weak * 100 > n {
+    let weak = mags.iter().filter(|&&v| v < 0.1 * med).count();
+    if !(med > 0.0) || weak * 100 > nd {
         return Err(Error::Signal(format!(
             "the mesh line near {fm0:.1} Hz is too weak to track: its demodulated magnitude \
-             falls under a tenth of its median on {weak} of {n} samples"
+             falls under a tenth of its median on {weak} of {nd} decimated samples"
         )));
     }
-    let mut revs = Vec::with_capacity(n);
-    let mut prev = buf[0].arg();
-    let mut unwrapped = 0.0;
     let tau = std::f64::consts::TAU;
-    for (i, c) in buf.iter().enumerate() {
+    let mut psi = Vec::with_capacity(nd);
+    let mut prev = small[0].arg();
+    let mut unwrapped = 0.0;
+    for (j, c) in small[..nd].iter().enumerate() {
         let a = c.arg();
-        if i > 0 {
+        if j > 0 {
             let mut d = a - prev;
             d -= tau * (d / tau).round();
             unwrapped += d;
         }
         prev = a;
-        revs.push((phi_a[i] + unwrapped / tau) / mesh_order);
+        psi.push(unwrapped / tau);
     }
+    let mut revs: Vec<f64> = (0..n)
+        .map(|i| (phi_a[i] + cubic_at(&psi, i as f64 / step)) / mesh_order)
+        .collect();
     let r0 = revs[0];
     for r in &mut revs {
         *r -= r0;
@@ -702,7 +783,10 @@ mod tests {
         // Order spectrum: all of the power at order z.
         let s = amplitude_spectrum(&r.samples, 64.0, Window::Hann).unwrap();
         let (fpk, apk) = s.peak_near(20.0, 2.0);
-        assert!((fpk - z).abs() < 1e-9 && (apk - 1.0).abs() < 0.02, "{fpk} {apk}");
+        assert!(
+            (fpk - z).abs() < 1e-9 && (apk - 1.0).abs() < 0.02,
+            "{fpk} {apk}"
+        );
         // Tacho-less on the same tone gives the same rate.
         let m = track_mesh_phase(&x, fs, z * f0, z, &MeshTrackOptions::default()).unwrap();
         assert!((m.summary.mean_hz - f0).abs() < 1e-3, "{:?}", m.summary);
@@ -715,5 +799,9 @@ mod tests {
         assert!(track_mesh_phase(&x, 1000.0, -1.0, 10.0, &MeshTrackOptions::default()).is_err());
         assert!(track_tachometer(&[0.0; 100], 1000.0, 1).is_err());
         assert_eq!(samples_per_rev_for(12_900.0, 30.0), 512);
+        assert_eq!(fast_len(25_600), 25_600);
+        assert_eq!(fast_len(88_832), 90_000);
+        assert_eq!(fast_len(1), 1);
+        assert_eq!(fast_len(7), 8);
     }
 }

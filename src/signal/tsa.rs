@@ -211,6 +211,14 @@ fn finite(v: f64) -> Option<f64> {
 ///
 /// Errors: as [`tsa_signals`].
 pub fn gear_metrics(x: &[f64], mesh_orders: &[usize]) -> Result<GearMetrics> {
+    gear_metrics_and_signals(x, mesh_orders).map(|(m, _)| m)
+}
+
+/// [`gear_metrics`] and the [`TsaSignals`] they were computed from.
+pub fn gear_metrics_and_signals(
+    x: &[f64],
+    mesh_orders: &[usize],
+) -> Result<(GearMetrics, TsaSignals)> {
     let s = tsa_signals(x, mesh_orders)?;
     let p = x.len();
     let z = *mesh_orders
@@ -241,8 +249,10 @@ pub fn gear_metrics(x: &[f64], mesh_orders: &[usize]) -> Result<GearMetrics> {
     let mg = central(&s.regular);
     let sd = v2.sqrt();
     let a = |k: usize| s.order_amplitudes.get(k).copied().unwrap_or(0.0);
-    Ok(GearMetrics {
-        fm0: (mesh_sum > 0.0).then(|| (mx - mn) / mesh_sum).and_then(finite),
+    let metrics = GearMetrics {
+        fm0: (mesh_sum > 0.0)
+            .then(|| (mx - mn) / mesh_sum)
+            .and_then(finite),
         fm4: ratio_moment(md, 1),
         na4: ratio_moment(mr, 1),
         nb4: ratio_moment(me, 1),
@@ -251,12 +261,15 @@ pub fn gear_metrics(x: &[f64], mesh_orders: &[usize]) -> Result<GearMetrics> {
         er: (mg[0] > tiny)
             .then(|| rms_of(md) / rms_of(mg))
             .and_then(finite),
-        slf: (v2 > 0.0).then(|| (a(z - 1) + a(z + 1)) / sd).and_then(finite),
+        slf: (v2 > 0.0)
+            .then(|| (a(z - 1) + a(z + 1)) / sd)
+            .and_then(finite),
         rms: sd,
         kurtosis: (v2 > 0.0).then(|| v4 / (v2 * v2)).and_then(finite),
         residual_ratio: (v2 > 0.0).then(|| rms_of(mr) / sd).and_then(finite),
         mesh_order: z,
-    })
+    };
+    Ok((metrics, s))
 }
 
 #[cfg(test)]
@@ -353,10 +366,7 @@ mod tests {
             .map(|(a, b)| a + 0.3 * b)
             .collect();
         let healthy = gear_metrics(&y, &[z]).unwrap();
-        for (name, v) in [
-            ("fm4", healthy.fm4.unwrap()),
-            ("na4", healthy.na4.unwrap()),
-        ] {
+        for (name, v) in [("fm4", healthy.fm4.unwrap()), ("na4", healthy.na4.unwrap())] {
             assert!((v - 3.0).abs() < 0.6, "{name} = {v} ({healthy:?})");
         }
         // Gaussian M6A ≈ 15, M8A ≈ 105 (the 6th and 8th standardised moments).
