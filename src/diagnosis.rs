@@ -236,6 +236,15 @@ pub struct Diagnosis {
     pub table_model_hash: String,
     pub sensor: String,
     pub warnings: Vec<String>,
+    /// Order tracking of the input shaft from the phase of the f1 line, the time-synchronous
+    /// average of every shaft it reaches and the gear condition metrics on it (FM0, FM4, NA4,
+    /// NB4, M6A, M8A, ER, SLF; [`crate::novelty::order_analysis`]). Absent when the tracking
+    /// fails (`order_error` says why).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub order: Option<crate::novelty::OrderAnalysis>,
+    /// Why there is no `order` (e.g. a record of fewer than 16 revolutions).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub order_error: Option<String>,
 }
 
 /// Per-entry statistics of the clipped features.
@@ -960,6 +969,13 @@ pub fn diagnose_with_spectrum(
     let ci = inp.condition_indicators(f1, shaft)?;
     let x = inp.x;
     let fs = inp.fs;
+    // The f1 found above is precise: the tracker searches its line within ±1 %.
+    let spectrum = spectrum.into_whole();
+    let (order, order_error) =
+        match crate::novelty::order_analysis_with(x, fs, inp.gb, f1, 0.01, spectrum.as_ref()) {
+            Ok(a) => (Some(a), None),
+            Err(e) => (None, Some(e.to_string())),
+        };
     let diagnosis = Diagnosis {
         wear_degree: wear,
         f1_hz: f1,
@@ -993,8 +1009,10 @@ pub fn diagnose_with_spectrum(
         table_model_hash: table.model_hash.clone(),
         sensor: table.sensor.label().into(),
         warnings,
+        order,
+        order_error,
     };
-    Ok((diagnosis, spectrum.into_whole()))
+    Ok((diagnosis, spectrum))
 }
 
 /// The record and the table's facts that the steps of [`diagnose_with_spectrum`] share.

@@ -152,6 +152,12 @@ pub enum Error {
         table_hash: String,
         model_hash: String,
     },
+    /// A machine baseline needs more healthy records.
+    #[error(
+        "a baseline needs at least {needed} healthy records of the machine; {records} given \
+         (add records known to be healthy)"
+    )]
+    BaselineTooSmall { records: usize, needed: usize },
 }
 
 /// `` `a1`, `a2`, `a3` ``; past 16 names, the first 16 and how many there are in all (a WAV

@@ -16,6 +16,8 @@
 //!   share.
 //! - [`signature`]: the model's line set, the gain-invariant features and the precomputed
 //!   signature table.
+//! - [`novelty`]: features of a record (order tracking, TSA metrics, band levels), a machine's
+//!   healthy baseline and the novelty score against it.
 //! - [`plot`]: PNG/SVG figures (plotters, embedded font: no system font needed).
 //!
 //! The numeric modules import nothing from a web framework or a database.

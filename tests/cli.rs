@@ -331,3 +331,74 @@ fn synth_then_diagnose_round_trip_through_files() {
     assert!(!ok && err.contains(".wav"), "{err}");
     std::fs::remove_dir_all(dir).ok();
 }
+
+/// `diagnose --baseline`: three healthy records give a `novelty` object with a calibrated
+/// threshold; two give a clear error; the diagnosis carries the order tracking of the record.
+#[test]
+fn diagnose_with_a_baseline_scores_novelty() {
+    let dir = tmpdir("baseline");
+    let synth = |name: &str, ea: &str, seed: &str| {
+        let p = dir.join(name);
+        let (ok, _, err) = gearwear(&[
+            "synth",
+            "--ea",
+            ea,
+            "--seed",
+            seed,
+            "--output",
+            p.to_str().unwrap(),
+        ]);
+        assert!(ok, "{err}");
+        p.to_str().unwrap().to_string()
+    };
+    let base: Vec<String> = (1..=3)
+        .map(|k| synth(&format!("h{k}.wav"), "0.3", &k.to_string()))
+        .collect();
+    let rec = synth("t.wav", "0.3", "9");
+    let gearbox = config("wang2019.toml");
+    let mut args = vec![
+        "diagnose",
+        "--input",
+        &rec,
+        "--shaft-hz",
+        "30",
+        "--gearbox",
+        &gearbox,
+    ];
+    for b in &base {
+        args.extend(["--baseline", b.as_str()]);
+    }
+    let (ok, out, err) = gearwear(&args);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let n = &v["novelty"];
+    assert_eq!(n["baseline_records"], 3, "{n}");
+    let (score, thr) = (
+        n["score"].as_f64().unwrap(),
+        n["threshold"].as_f64().unwrap(),
+    );
+    assert!(score.is_finite() && score >= 0.0 && thr >= 3.0, "{n}");
+    assert_eq!(n["anomalous"].as_bool().unwrap(), score > thr);
+    assert!(!n["top_features"].as_array().unwrap().is_empty(), "{n}");
+    assert!(n["features_used"].as_u64().unwrap() > 20, "{n}");
+    // Order tracking of the input shaft from the f1 line: 30 Hz, a TSA of it.
+    let o = &v["order"];
+    let hz = o["tracking"]["mean_hz"].as_f64().unwrap();
+    assert!((hz - 30.0).abs() < 0.1, "{o}");
+    assert_eq!(o["tracked_shaft"], "motor", "{o}");
+    assert!(o["shafts"][0]["metrics"]["fm4"].as_f64().is_some(), "{o}");
+    // The existing fields are still there.
+    assert!(v["wear_degree"]["estimate"].as_f64().is_some());
+
+    let (ok, _, err) = gearwear(&[
+        "diagnose",
+        "--input",
+        &rec,
+        "--baseline",
+        &base[0],
+        "--baseline",
+        &base[1],
+    ]);
+    assert!(!ok);
+    assert!(err.contains("at least 3"), "{err}");
+}

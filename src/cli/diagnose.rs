@@ -9,6 +9,7 @@ use clap::{Args, ValueEnum};
 use super::common::{RigArgs, default_table_for, load_table, parse_range, progress_bar};
 use crate::analysis::bifurcation::grid;
 use crate::diagnosis::{DiagnoseOptions, diagnose};
+use crate::novelty::{MIN_BASELINE_RECORDS, MachineBaseline, record_features};
 use crate::record::{Column, Format, ReadOptions, read_record};
 use crate::signal::lines::SEGMENT_PERIODS;
 use crate::signature::SensorQuantity;
@@ -112,6 +113,12 @@ pub struct DiagnoseArgs {
     /// given, else the paper's rig).
     #[arg(long, value_name = "FILE")]
     pub gearbox: Option<PathBuf>,
+    /// A healthy record of the same machine (same column and sample-rate options); give at
+    /// least three (`--baseline a.csv --baseline b.csv …`). The diagnosis then carries
+    /// `novelty`: the record's score against these records' features, the threshold calibrated
+    /// on them by leave-one-out, and the features that deviate most.
+    #[arg(long, value_name = "FILE")]
+    pub baseline: Vec<PathBuf>,
 }
 
 /// `gearwear precompute`.
@@ -223,6 +230,31 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
         column: a.column.as_deref().map(Column::parse),
     };
     let record = read_record(&a.input, &opts)?;
+    // Baseline first: a wrong baseline file should fail before the diagnosis runs.
+    let baseline = if a.baseline.is_empty() {
+        None
+    } else {
+        // Order tracking needs the gearbox's tooth counts: only with a description.
+        let gb = a.gearbox.is_some().then(|| table.gearbox());
+        let mut feats = Vec::with_capacity(a.baseline.len());
+        for path in &a.baseline {
+            let rec = read_record(path, &opts)
+                .with_context(|| format!("baseline record {}", path.display()))?;
+            feats.push(
+                record_features(&rec, gb, a.shaft_hz)
+                    .with_context(|| format!("baseline record {}", path.display()))?,
+            );
+        }
+        let b = MachineBaseline::fit(&feats).with_context(|| {
+            format!(
+                "{} --baseline file(s) given; give at least {MIN_BASELINE_RECORDS} healthy \
+                 records of the machine",
+                a.baseline.len()
+            )
+        })?;
+        let f = record_features(&record, gb, a.shaft_hz)?;
+        Some(b.score(&f))
+    };
     let d = diagnose(
         &record,
         &table,
@@ -232,6 +264,20 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
             ..Default::default()
         },
     )?;
-    println!("{}", serde_json::to_string_pretty(&d)?);
+    /// The diagnosis's fields in their order, then `novelty`.
+    #[derive(serde::Serialize)]
+    struct WithNovelty<'a> {
+        #[serde(flatten)]
+        diagnosis: &'a crate::diagnosis::Diagnosis,
+        novelty: crate::novelty::Novelty,
+    }
+    let json = match baseline {
+        Some(novelty) => serde_json::to_string_pretty(&WithNovelty {
+            diagnosis: &d,
+            novelty,
+        })?,
+        None => serde_json::to_string_pretty(&d)?,
+    };
+    println!("{json}");
     Ok(())
 }

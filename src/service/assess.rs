@@ -199,6 +199,7 @@ mod tests {
             threshold: 3.0,
             anomalous: score > 3.0,
             baseline_records: 5,
+            features_used: 10,
             top_features: vec![FeatureZ {
                 name: "x".into(),
                 z: score,
@@ -256,6 +257,7 @@ mod tests {
             features: RecordFeatures {
                 values: Default::default(),
                 indicators: Value::Null,
+                group: None,
             },
             novelty: Some(nov(score)),
             alert: Alert {

@@ -1,6 +1,7 @@
 //! Windows, amplitude spectra, simple signal statistics, and the line estimator ([`lines`]:
 //! Hann DTFT amplitudes of lines at multiples of a mesh frequency, shared by the signature
-//! table, the diagnosis and the closed loop).
+//! table, the diagnosis and the closed loop), order tracking and angular resampling ([`order`])
+//! and the time-synchronous average with its gear condition metrics ([`tsa`]).
 //!
 //! # Conventions (read this first)
 //!
@@ -29,10 +30,12 @@
 
 pub mod features;
 pub mod lines;
+pub mod order;
 mod phasor;
 mod plan;
 mod spectrum;
 mod stats;
+pub mod tsa;
 mod window;
 
 pub(crate) use phasor::{dtft_sums, unit_phasors};
