@@ -14,6 +14,10 @@
 //! * The level is the higher of the two that count. When neither counts — the model does not
 //!   fit (or the table is not ready) and the machine has no baseline — the level is `unknown`:
 //!   not `ok`, because nothing vouches for the machine.
+//! * A record posted as healthy (`?baseline=true`) is vouched for by the caller: its level is
+//!   `ok` (basis `baseline`), or the wear level if the model fits and it is higher; its novelty
+//!   against the earlier baseline is still reported (a baseline record unlike the others is
+//!   worth seeing) but raises no alert.
 //! * Several channels: each gets its level; the record's is the most severe (alarm > warning >
 //!   unknown > ok), ties broken by the larger novelty score over its threshold; that channel
 //!   is named as the one that decides.
@@ -30,7 +34,7 @@ use crate::novelty::{Novelty, RecordFeatures};
 pub struct Alert {
     /// `ok`, `warning`, `alarm` or `unknown`.
     pub level: &'static str,
-    /// `wear`, `novelty`, `wear+novelty` or `none`: what the level rests on.
+    /// `wear`, `novelty`, `wear+novelty`, `baseline` or `none`: what the level rests on.
     pub basis: &'static str,
     /// One sentence a person can act on.
     pub reason: String,
@@ -55,8 +59,29 @@ pub fn alert(
     novelty: Option<&Novelty>,
     th: &Thresholds,
     table_note: Option<&str>,
+    declared_healthy: bool,
 ) -> Alert {
     let wear_level = wear.filter(|w| !w.1).map(|w| th.level(w.0));
+    if declared_healthy && wear_level.is_none_or(|w| w == "ok") {
+        return Alert {
+            level: "ok",
+            basis: "baseline",
+            reason: match novelty {
+                Some(n) => format!(
+                    "posted as healthy (baseline record); its novelty against the earlier \
+                     baseline is {:.2} (threshold {:.2}){}",
+                    n.score,
+                    n.threshold,
+                    if n.anomalous {
+                        ": unlike the other baseline records — check it belongs"
+                    } else {
+                        ""
+                    }
+                ),
+                None => "posted as healthy (baseline record)".into(),
+            },
+        };
+    }
     let nov_level = novelty.map(|n| {
         if !n.anomalous {
             "ok"
@@ -209,10 +234,10 @@ mod tests {
 
     #[test]
     fn a_record_nothing_vouches_for_is_unknown_not_ok() {
-        let a = alert(Some((0.2, true, 40.0)), None, &TH, None);
+        let a = alert(Some((0.2, true, 40.0)), None, &TH, None, false);
         assert_eq!(a.level, "unknown");
         assert!(a.reason.contains("baseline"), "{}", a.reason);
-        let a = alert(None, None, &TH, Some("the table is not ready"));
+        let a = alert(None, None, &TH, Some("the table is not ready"), false);
         assert_eq!(a.level, "unknown");
         assert!(
             a.reason.starts_with("the table is not ready"),
@@ -222,31 +247,49 @@ mod tests {
     }
 
     #[test]
+    fn a_record_posted_as_healthy_raises_no_alert_of_its_own() {
+        let a = alert(Some((0.2, true, 40.0)), Some(&nov(9.0)), &TH, None, true);
+        assert_eq!((a.level, a.basis), ("ok", "baseline"));
+        assert!(a.reason.contains("unlike"), "{}", a.reason);
+        // A wear degree the model vouches for still counts.
+        assert_eq!(
+            alert(Some((0.9, false, 1.0)), None, &TH, None, true).level,
+            "alarm"
+        );
+    }
+
+    #[test]
     fn a_poor_fit_defers_to_the_baseline() {
         assert_eq!(
-            alert(Some((0.9, true, 40.0)), Some(&nov(1.0)), &TH, None).level,
+            alert(Some((0.9, true, 40.0)), Some(&nov(1.0)), &TH, None, false).level,
             "ok"
         );
-        let a = alert(Some((0.1, true, 40.0)), Some(&nov(4.0)), &TH, None);
+        let a = alert(Some((0.1, true, 40.0)), Some(&nov(4.0)), &TH, None, false);
         assert_eq!((a.level, a.basis), ("warning", "novelty"));
-        assert_eq!(alert(None, Some(&nov(6.5)), &TH, None).level, "alarm");
+        assert_eq!(
+            alert(None, Some(&nov(6.5)), &TH, None, false).level,
+            "alarm"
+        );
     }
 
     #[test]
     fn a_good_fit_and_a_baseline_take_the_more_severe() {
         assert_eq!(
-            alert(Some((0.9, false, 1.0)), Some(&nov(1.0)), &TH, None).level,
+            alert(Some((0.9, false, 1.0)), Some(&nov(1.0)), &TH, None, false).level,
             "alarm"
         );
         assert_eq!(
-            alert(Some((0.1, false, 1.0)), Some(&nov(4.0)), &TH, None).level,
+            alert(Some((0.1, false, 1.0)), Some(&nov(4.0)), &TH, None, false).level,
             "warning"
         );
         assert_eq!(
-            alert(Some((0.6, false, 1.0)), None, &TH, None).level,
+            alert(Some((0.6, false, 1.0)), None, &TH, None, false).level,
             "warning"
         );
-        assert_eq!(alert(Some((0.1, false, 1.0)), None, &TH, None).level, "ok");
+        assert_eq!(
+            alert(Some((0.1, false, 1.0)), None, &TH, None, false).level,
+            "ok"
+        );
     }
 
     #[test]

@@ -1008,6 +1008,7 @@ async fn ingest(
         baselines,
         thresholds: app.settings.thresholds,
         table_note: table_note.clone(),
+        declared_healthy: baseline,
     };
     let (dec, results, spectrum) = tokio::task::spawn_blocking(move || job.run())
         .await
@@ -1200,6 +1201,8 @@ struct ChannelJob {
     baselines: std::collections::BTreeMap<String, crate::novelty::MachineBaseline>,
     thresholds: crate::configuration::Thresholds,
     table_note: Option<String>,
+    /// Posted with `?baseline=true`.
+    declared_healthy: bool,
 }
 
 type JobResult = (
@@ -1240,6 +1243,7 @@ impl ChannelJob {
                 novelty.as_ref(),
                 &self.thresholds,
                 self.table_note.as_deref(),
+                self.declared_healthy,
             );
             results.push(ChannelResult {
                 name: name.clone(),

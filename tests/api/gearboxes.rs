@@ -290,6 +290,11 @@ async fn a_baseline_makes_a_machine_the_model_does_not_fit_judgeable(b: Backend)
         .await;
         assert_eq!(s, 201, "{d}");
         assert_eq!(d["baseline"]["this_record"], true);
+        assert_eq!(
+            (d["alert_level"].as_str(), d["alert"]["basis"].as_str()),
+            (Some("ok"), Some("baseline")),
+            "{d}"
+        );
     }
     let (s, d) = post_record(&app, "real-1", "", &foreign_record(5, false)).await;
     assert_eq!(s, 201, "{d}");
