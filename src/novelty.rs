@@ -498,10 +498,15 @@ fn median(v: &mut [f64]) -> f64 {
     }
 }
 
-/// Location and scale of every feature that at least [`MIN_BASELINE_RECORDS`] records have.
+/// Location and scale of every feature that at least `min_records` records have
+/// ([`MIN_BASELINE_RECORDS`] for a baseline; one less for its leave-one-out fits, so that a
+/// baseline of exactly three records is still calibrated).
 /// Records of one group are near-duplicates (segments of one file): each group enters through
 /// the median of its records, so that the spread is the spread *between* groups.
-fn feature_stats(records: &[&RecordFeatures]) -> BTreeMap<String, FeatureStats> {
+fn feature_stats(
+    records: &[&RecordFeatures],
+    min_records: usize,
+) -> BTreeMap<String, FeatureStats> {
     // feature → group → values
     let mut by: BTreeMap<&str, BTreeMap<String, Vec<f64>>> = BTreeMap::new();
     for (i, r) in records.iter().enumerate() {
@@ -517,7 +522,7 @@ fn feature_stats(records: &[&RecordFeatures]) -> BTreeMap<String, FeatureStats> 
         }
     }
     by.into_iter()
-        .filter(|(_, g)| g.values().map(Vec::len).sum::<usize>() >= MIN_BASELINE_RECORDS)
+        .filter(|(_, g)| g.values().map(Vec::len).sum::<usize>() >= min_records)
         .map(|(k, groups)| {
             let n = groups.values().map(Vec::len).sum();
             let mut v: Vec<f64> = groups.into_values().map(|mut g| median(&mut g)).collect();
@@ -573,7 +578,7 @@ impl MachineBaseline {
             });
         }
         let all: Vec<&RecordFeatures> = records.iter().collect();
-        let features = feature_stats(&all);
+        let features = feature_stats(&all, MIN_BASELINE_RECORDS);
         // Leave-one-out units: the groups, unless there are fewer than three of them.
         let groups: BTreeSet<&str> = records.iter().filter_map(|r| r.group.as_deref()).collect();
         let grouped =
@@ -593,7 +598,7 @@ impl MachineBaseline {
                 .filter(|&j| unit_of(j) != u)
                 .map(|j| &records[j])
                 .collect();
-            let st = feature_stats(&rest);
+            let st = feature_stats(&rest, MIN_BASELINE_RECORDS - 1);
             loo.push(score_against(&st, &records[i]).0);
         }
         let u = units.len();
@@ -742,6 +747,19 @@ mod tests {
             "{hits} of 100 detected (threshold {})",
             b.threshold
         );
+    }
+
+    /// Three records: each leave-one-out fit has two, and still calibrates the threshold.
+    #[test]
+    fn three_records_are_calibrated() {
+        let base = [
+            feats(&[("a", 0.0)]),
+            feats(&[("a", 0.05)]),
+            feats(&[("a", 1.0)]),
+        ];
+        let b = MachineBaseline::fit(&base).unwrap();
+        // The third, against (0, 0.05): location 0.025, scale at the 0.1 floor: z = 9.75.
+        assert!((b.threshold - 9.75).abs() < 1e-9, "{:?}", b.loo_scores);
     }
 
     #[test]
