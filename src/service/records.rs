@@ -1009,6 +1009,7 @@ async fn ingest(
         thresholds: app.settings.thresholds,
         table_note: table_note.clone(),
         declared_healthy: baseline,
+        described: ctx.machine.as_ref().is_some_and(|m| m.gearbox_id.is_some()),
     };
     let (dec, results, spectrum) = tokio::task::spawn_blocking(move || job.run())
         .await
@@ -1203,6 +1204,8 @@ struct ChannelJob {
     table_note: Option<String>,
     /// Posted with `?baseline=true`.
     declared_healthy: bool,
+    /// The machine names its gearbox (not the built-in default).
+    described: bool,
 }
 
 type JobResult = (
@@ -1236,7 +1239,12 @@ impl ChannelJob {
             let hint = shaft.or(self.input_shaft_hz).or(output
                 .as_ref()
                 .map(|o| o.f1_hz / self.gearbox.f1_per_input_hz));
-            let features = crate::novelty::record_features(&rec, Some(&self.gearbox), hint)?;
+            // Order features only for a gearbox the machine was given: the built-in rig a
+            // machine defaults to would track 29 teeth in another gearbox's records (noise
+            // features that make a baseline unstable); without one the features are
+            // description-free.
+            let gb = self.described.then_some(self.gearbox.as_ref());
+            let features = crate::novelty::record_features(&rec, gb, hint)?;
             let novelty = self.baselines.get(name).map(|b| b.score(&features));
             let alert = alert(
                 output.as_ref().map(ChannelResult::wear),
