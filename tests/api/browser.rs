@@ -183,7 +183,15 @@ async fn dashboard_updates_when_a_record_arrives() {
              return li && e !== '–' ? e : null",
         )
         .await;
-    let est: f64 = est.as_str().unwrap().parse().unwrap();
+    // The number first; a note may follow it ("(poor fit: not used for the alert)").
+    let est: f64 = est
+        .as_str()
+        .unwrap()
+        .split_whitespace()
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
     let api = json(
         &app.get("/v1/machines/gearbox-1")
             .await
@@ -604,6 +612,20 @@ async fn dashboard_shows_the_fleet_by_severity_and_a_machine_from_the_url() {
         })
         .collect();
     assert_eq!(times.len(), 5);
+    // A wear degree the model's poor fit keeps out of the alert says so.
+    let poor_fit = api_m["latest"]["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|w| w.as_str().unwrap().starts_with("poor fit"));
+    let wear = d
+        .script("return document.getElementById('wear-estimate').textContent")
+        .await;
+    assert_eq!(
+        wear.as_str().unwrap().contains("poor fit"),
+        poor_fit,
+        "{wear} / {api_m}"
+    );
     for chart in ["trend", "novelty"] {
         let ticks = d
             .script(&format!(

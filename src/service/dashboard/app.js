@@ -199,7 +199,9 @@ function timeAxes(svg, W, H, pad, t0, t1, y0, y1, yl) {
     const x = sx(t);
     el("line", { x1: x, x2: x, y1: pad.t, y2: H - pad.b, stroke: "#f2f3f5" }, svg);
     el("line", { x1: x, x2: x, y1: H - pad.b, y2: H - pad.b + 4, stroke: "#9aa3af" }, svg);
-    el("text", { x, y: H - pad.b + 15, "text-anchor": "middle", class: "tick-x", "data-t": new Date(t).toISOString() }, svg,
+    // Labels at the edges stay inside the chart.
+    const anchor = x > W - pad.r - 24 ? "end" : x < pad.l + 24 ? "start" : "middle";
+    el("text", { x, y: H - pad.b + 15, "text-anchor": anchor, class: "tick-x", "data-t": new Date(t).toISOString() }, svg,
       tickLabel(t, step));
   }
   el("line", { x1: pad.l, y1: H - pad.b, x2: W - pad.r, y2: H - pad.b, stroke: "#9aa3af" }, svg);
@@ -450,7 +452,8 @@ function renderLatest(m) {
   $("latest-at").textContent = l ? when(l.created_at) : "";
   const w = l && l.wear_degree;
   const ch = l && Array.isArray(l.channels) ? l.channels.find((c) => c.name === l.channel) : null;
-  const poor = ch && ch.fit && ch.fit.inflated;
+  // A single-channel answer carries no per-channel fit: its warnings say "poor fit" instead.
+  const poor = ch && ch.fit ? !!ch.fit.inflated : !!l && (l.warnings || []).some((x) => /^poor fit/.test(x));
   $("wear-estimate").textContent = w && num(w.estimate)
     ? w.estimate.toFixed(3) + (poor ? " (poor fit: not used for the alert)" : "")
     : l ? "– (no wear degree)" : "–";
