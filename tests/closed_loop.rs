@@ -125,3 +125,89 @@ fn a_tone_outside_the_library_is_unexplained() {
         r.unexplained
     );
 }
+
+#[test]
+fn refit_wear_is_continuous_with_a_real_interval() {
+    // The eccentricity record of the test above: an element effect is claimed, so the wear is
+    // refitted by the profile likelihood.
+    let r = run(
+        RigEffects {
+            eccentricity: Some(0.1),
+            ..Default::default()
+        },
+        2001,
+        40.0,
+    );
+    let w = &r.wear_after;
+    assert_eq!(w.method, "profile-likelihood");
+    assert!(
+        w.ea_lower < w.ea && w.ea < w.ea_upper,
+        "interval [{}, {}] around {}",
+        w.ea_lower,
+        w.ea_upper,
+        w.ea
+    );
+    assert!(w.ea_upper - w.ea_lower > 0.005, "{w:?}");
+    assert!(w.ea_lower <= EA + 0.02 && EA - 0.02 <= w.ea_upper, "{w:?}");
+}
+
+#[test]
+fn a_resonance_below_the_mesh_is_named_at_its_frequency() {
+    // A peaking mode at 0.45 f1 (Q 10, peak gain 6): far from the old single starting guess.
+    let r = run(
+        RigEffects {
+            path_peak: Some((0.45, 0.05, 6.0)),
+            ..Default::default()
+        },
+        2005,
+        3.0,
+    );
+    assert_eq!(names(&r), vec!["path-resonance"], "{:?}", r.candidates);
+    let p = &r.effects[0].parameters;
+    assert!(
+        (p["frequency_ratio"] / 0.45 - 1.0).abs() < 0.05,
+        "fitted {p:?}"
+    );
+    assert!(r.error_after < r.error_before);
+}
+
+#[test]
+fn a_damaged_tooth_is_named_on_its_gear() {
+    let table = SignatureTable::load(std::path::Path::new(DEFAULT_TABLE_PATH)).unwrap();
+    let gears = gearwear::closed_loop::effects::reference_gears(table.gearbox());
+    let pinion = &gears[0];
+    let r = run(
+        RigEffects {
+            tooth: Some((pinion.shaft_ratio, 0.6)),
+            ..Default::default()
+        },
+        2006,
+        2.0,
+    );
+    assert_eq!(names(&r), vec!["tooth-damage"], "{:?}", r.candidates);
+    let e = &r.effects[0];
+    assert_eq!(e.labels["shaft"], pinion.shaft, "{e:?}");
+    assert!(r.error_after < r.error_before);
+}
+
+#[test]
+fn mains_hum_is_unexplained_and_called_electrical_pickup() {
+    let r = run(
+        RigEffects {
+            mains: Some((50.0, -15.0)),
+            ..Default::default()
+        },
+        2007,
+        0.5,
+    );
+    assert!(r.effects.is_empty(), "misattributed to {:?}", names(&r));
+    assert!(
+        r.unexplained
+            .iter()
+            .filter(|u| u.guess.contains("mains"))
+            .count()
+            >= 2,
+        "{:?}",
+        r.unexplained
+    );
+}
