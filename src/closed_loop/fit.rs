@@ -91,7 +91,7 @@ pub(crate) fn sensor_model(s: &[f64], r: &[f64], sensor: &SensorFit) -> Vec<f64>
 /// Bounds of a fitted path resonance: `ρ` (units of f1), `ζ`, peak gain `g`.
 pub const RHO_RANGE: (f64, f64) = (0.1, 3.5);
 /// See [`RHO_RANGE`].
-pub const ZETA_RANGE: (f64, f64) = (0.008, 0.5);
+pub const ZETA_RANGE: (f64, f64) = (0.015, 0.5);
 /// See [`RHO_RANGE`].
 pub const PEAK_GAIN_RANGE: (f64, f64) = (0.3, 40.0);
 
@@ -141,17 +141,17 @@ pub(crate) fn fit_sensor(
 }
 
 /// Search a path resonance over the whole band without one starting guess: every point of a
-/// grid of `ρ` (80 points, log-spaced over [`RHO_RANGE`]) × `ζ` (0.015 … 0.25) × form
-/// (low-pass; peaking with `g` = 2, 5, 10) is scored with only gain and noise fitted; the four
+/// grid of `ρ` (64 points, log-spaced over [`RHO_RANGE`]) × `ζ` (0.02 … 0.25) × form
+/// (low-pass; peaking with `g` = 3, 8) is scored with only gain and noise fitted; the four
 /// best grid points at distinct frequencies (more than 8 % apart) each start a full
 /// Levenberg–Marquardt fit of every parameter; the lowest residual wins.
 pub(crate) fn search_resonance(m: &[f64], s: &[f64], r: &[f64]) -> (SensorFit, f64) {
-    let n_rho = 80;
+    let n_rho = 64;
     let mut scored: Vec<(Resonance, f64)> = Vec::new();
     for i in 0..n_rho {
         let rho = RHO_RANGE.0 * (RHO_RANGE.1 / RHO_RANGE.0).powf(i as f64 / (n_rho - 1) as f64);
-        for zeta in [0.015, 0.03, 0.06, 0.12, 0.25] {
-            for g in [None, Some(2.0), Some(5.0), Some(10.0)] {
+        for zeta in [0.02, 0.05, 0.12, 0.25] {
+            for g in [None, Some(3.0), Some(8.0)] {
                 let res = Resonance {
                     rho,
                     zeta,

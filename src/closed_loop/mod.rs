@@ -122,7 +122,13 @@ pub struct Candidate {
     pub bic: f64,
     /// BIC minus the BIC of `none` (negative: better).
     pub delta_bic: f64,
+    /// Share of its RSS improvement over `none` that falls on its fingerprint points (it is
+    /// eligible only from [`SUPPORT_SHARE`] on; 1 for `none`).
+    pub fingerprint_share: f64,
 }
+
+/// Share of a candidate's improvement that must fall on its fingerprint (see [`calibrate`]).
+pub const SUPPORT_SHARE: f64 = 0.25;
 
 /// A residual feature: a run of grid points beyond the threshold.
 #[derive(Debug, Clone, Serialize)]
@@ -298,11 +304,11 @@ fn ea_grid(start: f64) -> Vec<f64> {
     v
 }
 
-/// The grid points within ±0.1 of `centre`, plus `centre` (a local profile).
+/// The grid points within ±0.05 of `centre`, plus `centre` (a local profile).
 fn ea_window(centre: f64) -> Vec<f64> {
     let mut v: Vec<f64> = ea_grid(centre)
         .into_iter()
-        .filter(|x| (x - centre).abs() <= 0.1 + 1e-9)
+        .filter(|x| (x - centre).abs() <= 0.05 + 1e-9)
         .collect();
     if v.iter().all(|x| (x - centre).abs() > 1e-9) {
         v.push(centre);
@@ -440,7 +446,6 @@ pub fn calibrate(
         m.iter().zip(&f).map(|(a, b)| a - b).collect()
     };
     let j_eff = effective_points(&resid_none);
-    let bic = |rss: f64, k: usize| j_eff * (rss / j_n).max(1e-300).ln() + k as f64 * j_eff.ln();
     let mut cands: Vec<Fitted> = vec![Fitted {
         name: "none".into(),
         effects: vec![],
@@ -451,10 +456,22 @@ pub fn calibrate(
     }];
 
     // Path resonance (sensor stage): searched over the band at the plain model's best ea,
-    // then ea profiled locally with the resonance re-fitted at each point.
-    let (sens_r0, _) = search_resonance(&m, &sim.spectrum(&pn)?, &r);
-    let res0 = sens_r0.resonance.expect("fitted resonance");
-    let prof_res = sim.profile(&m, &r, pn, &ea_window(pn.ea), Some(res0), None)?;
+    // ea profiled over the whole grid with the resonance re-fitted (the plain model's
+    // simulations, cached), searched again at the new ea, profiled again.
+    let mut res_start = search_resonance(&m, &sim.spectrum(&pn)?, &r)
+        .0
+        .resonance
+        .expect("fitted resonance");
+    let mut prof_res = sim.profile(&m, &r, pn, &ea_grid(p0.ea), Some(res_start), None)?;
+    let (pr1, _, _) = best_point(&prof_res);
+    if (pr1.ea - pn.ea).abs() > 1e-9 {
+        let (again, _) = search_resonance(&m, &sim.spectrum(&pr1)?, &r);
+        res_start = again.resonance.expect("fitted resonance");
+        let prof2 = sim.profile(&m, &r, pn, &ea_grid(p0.ea), Some(res_start), None)?;
+        if best_point(&prof2).2 < best_point(&prof_res).2 {
+            prof_res = prof2;
+        }
+    }
     let (pr, sr_, rr) = best_point(&prof_res);
     let res_best = sr_.resonance.expect("fitted");
     cands.push(Fitted {
@@ -546,7 +563,7 @@ pub fn calibrate(
         let p = element_fit(pn, &set, 0.3, &comb, 0.02, 0.9)?;
         singles.push((TOOTH_DAMAGE.into(), p));
     }
-    let mut push = |name: String, p: ElementParams, res: Option<Resonance>| -> Result<()> {
+    let make = |name: String, p: ElementParams, res: Option<Resonance>| -> Result<Fitted> {
         let s = sim.spectrum(&p)?;
         let (sens, rss) = fit_sensor(&m, &s, &r, res);
         let mut effects = element_effects(&p, baseline_planetary, &gears, &input);
@@ -562,28 +579,39 @@ pub fn calibrate(
                     _ => 1,
                 })
                 .sum::<usize>();
-        cands.push(Fitted {
+        Ok(Fitted {
             name,
             effects,
             params: p,
             sensor: sens,
             rss,
             k,
-        });
-        Ok(())
+        })
     };
     for (name, p) in &singles {
-        push(name.clone(), *p, None)?;
+        cands.push(make(name.clone(), *p, None)?);
     }
-    // Pairs: each element effect with the resonance; element effects of different kinds.
-    for (name, p) in &singles {
-        push(format!("{name}+{PATH_RESONANCE}"), *p, Some(res_best))?;
-    }
-    for (i, (na, pa)) in singles.iter().enumerate() {
-        for (nb, pb) in singles.iter().skip(i + 1) {
-            if na == nb {
-                continue;
+    // Pairs: the best variant of each element effect with the resonance, and with each other.
+    let n_single = cands.len();
+    let mut best_variant: Vec<(String, ElementParams)> = Vec::new();
+    for (k, (name, p)) in singles.iter().enumerate() {
+        let rss = cands[n_single - singles.len() + k].rss;
+        match best_variant.iter().position(|(n, _)| n == name) {
+            Some(i) => {
+                let j = singles.iter().position(|(n, q)| n == name && *q == best_variant[i].1);
+                let old = j.map_or(f64::INFINITY, |j| cands[n_single - singles.len() + j].rss);
+                if rss < old {
+                    best_variant[i].1 = *p;
+                }
             }
+            None => best_variant.push((name.clone(), *p)),
+        }
+    }
+    for (name, p) in &best_variant {
+        cands.push(make(format!("{name}+{PATH_RESONANCE}"), *p, Some(res_best))?);
+    }
+    for (i, (na, pa)) in best_variant.iter().enumerate() {
+        for (nb, pb) in best_variant.iter().skip(i + 1) {
             let p = ElementParams {
                 eccentricity: pa.eccentricity.max(pb.eccentricity),
                 ecc_shaft: if pa.eccentricity > 0.0 {
@@ -600,21 +628,124 @@ pub fn calibrate(
                 },
                 ea: pa.ea,
             };
-            push(format!("{na}+{nb}"), p, None)?;
+            cands.push(make(format!("{na}+{nb}"), p, None)?);
         }
     }
 
-    // Selection.
+    // Attribution check: an effect is claimed only where its fingerprint is. The share of a
+    // candidate's RSS improvement over the plain model at the same ea (so that a wear
+    // correction, which moves every line, does not count) that falls on its fingerprint points
+    // (the plain model's own lines for a path stage — a resonance colours what the gearbox
+    // makes; the sidebands ± s of its shaft around every line of the plain model (and
+    // 1, 2 f1) for shaft modulation; the comb
+    // k f1 ± n s (n = 1 … 5) for tooth damage; a f1 ± c f3 (a = 0, 1, 2; c = 1, 2) for
+    // planetary wear; ±1 grid point) must reach [`SUPPORT_SHARE`]; otherwise the candidate is
+    // not eligible.
+    let f_none = sensor_model(&sim.spectrum(&cands[0].params)?, &r, &cands[0].sensor);
+    let near = |ratios: &[f64], mask: &mut [bool]| {
+        for &x in ratios {
+            if let Some(j) = grid_index(x) {
+                for k in j.saturating_sub(1)..=(j + 1).min(mask.len() - 1) {
+                    mask[k] = true;
+                }
+            }
+        }
+    };
+    let mut line_mask: Vec<bool> = vec![false; r.len()];
+    for (j, v) in f_none.iter().enumerate() {
+        if *v > cands[0].sensor.noise_db + 3.0 {
+            for k in j.saturating_sub(1)..=(j + 1).min(r.len() - 1) {
+                line_mask[k] = true;
+            }
+        }
+    }
+    // The plain model's lines: local maxima 6 dB above its noise floor.
+    let line_peaks: Vec<f64> = (1..r.len() - 1)
+        .filter(|&j| {
+            f_none[j] > cands[0].sensor.noise_db + 6.0
+                && f_none[j] >= f_none[j - 1]
+                && f_none[j] >= f_none[j + 1]
+        })
+        .map(|j| r[j])
+        .collect();
+    let fam_wide: Vec<f64> = f3
+        .map(|f3| {
+            [0.0, 1.0, 2.0]
+                .iter()
+                .flat_map(|a| [-2.0, -1.0, 1.0, 2.0].map(|c| (a + c * f3).abs()))
+                .collect()
+        })
+        .unwrap_or_default();
+    let mut support: Vec<f64> = vec![1.0; cands.len()];
+    for (ci, c) in cands.iter().enumerate().skip(1) {
+        let mut mask = vec![false; r.len()];
+        for e in &c.effects {
+            let s = e.parameters.get("shaft_ratio").copied().unwrap_or(0.0);
+            match e.name.as_str() {
+                PATH_RESONANCE => {
+                    for (mk, l) in mask.iter_mut().zip(&line_mask) {
+                        *mk |= *l;
+                    }
+                }
+                SHAFT_MODULATION => {
+                    let sb: Vec<f64> = line_peaks
+                        .iter()
+                        .flat_map(|l| [l - s, l + s])
+                        .chain([1.0 - s, 1.0 + s, 2.0 - s, 2.0 + s])
+                        .collect();
+                    near(&sb, &mut mask)
+                }
+                TOOTH_DAMAGE => {
+                    let comb: Vec<f64> = [1.0, 2.0]
+                        .iter()
+                        .flat_map(|c| (1..=5).flat_map(move |n| [c - n as f64 * s, c + n as f64 * s]))
+                        .collect();
+                    near(&comb, &mut mask);
+                }
+                _ => near(&fam_wide, &mut mask),
+            }
+        }
+        let fc = sensor_model(&sim.spectrum(&c.params)?, &r, &c.sensor);
+        let plain = sim.spectrum(&ElementParams::plain(c.params.ea, baseline_planetary))?;
+        let (sp, _) = fit_sensor(&m, &plain, &r, None);
+        let f_none = sensor_model(&plain, &r, &sp);
+        let (mut tot, mut inside) = (0.0, 0.0);
+        for j in 0..r.len() {
+            let d = (m[j] - f_none[j]).powi(2) - (m[j] - fc[j]).powi(2);
+            tot += d;
+            if mask[j] {
+                inside += d;
+            }
+        }
+        support[ci] = if tot > 0.0 { inside / tot } else { 0.0 };
+    }
+
+    // Selection. J_eff: the larger of the plain model's and the best candidate's residual
+    // (an effect present makes the plain residual smooth, which would hide its own evidence).
+    let best_c = (0..cands.len())
+        .min_by(|&a, &b| cands[a].rss.total_cmp(&cands[b].rss))
+        .expect("candidates");
+    let j_eff = {
+        let c = &cands[best_c];
+        let fc = sensor_model(&sim.spectrum(&c.params)?, &r, &c.sensor);
+        let rc: Vec<f64> = m.iter().zip(&fc).map(|(a, b)| a - b).collect();
+        j_eff.max(effective_points(&rc))
+    };
+    let bic = |rss: f64, k: usize| j_eff * (rss / j_n).max(1e-300).ln() + k as f64 * j_eff.ln();
     let scores: Vec<f64> = cands.iter().map(|c| bic(c.rss, c.k)).collect();
     let bic0 = scores[0];
+    let eligible = |i: usize| support[i] >= SUPPORT_SHARE;
     let best_of = |pred: &dyn Fn(&Fitted) -> bool| {
         (0..cands.len())
-            .filter(|&i| pred(&cands[i]))
+            .filter(|&i| pred(&cands[i]) && eligible(i))
             .min_by(|&a, &b| scores[a].total_cmp(&scores[b]))
     };
     let significant = |name: &str| {
-        cands.iter().zip(&scores).any(|(c, b)| {
-            c.effects.len() == 1 && c.effects[0].name == name && *b < bic0 - opts.bic_margin
+        cands.iter().zip(&scores).enumerate().any(|(i, (c, b))| {
+            c.effects.len() == 1
+                && c.effects[0].name == name
+                && *b < bic0 - opts.bic_margin
+                && eligible(i)
         })
     };
     let mut chosen = 0;
@@ -633,7 +764,8 @@ pub fn calibrate(
     let candidates: Vec<Candidate> = cands
         .iter()
         .zip(&scores)
-        .map(|(c, b)| Candidate {
+        .enumerate()
+        .map(|(i, (c, b))| Candidate {
             name: c.name.clone(),
             effects: c.effects.clone(),
             parameters: c.k,
@@ -641,6 +773,7 @@ pub fn calibrate(
             error_db: (c.rss / j_n).sqrt(),
             bic: *b,
             delta_bic: b - bic0,
+            fingerprint_share: support[i],
         })
         .collect();
 
