@@ -284,6 +284,37 @@ impl Simulator<'_> {
     }
 }
 
+impl Simulator<'_> {
+    /// [`Simulator::profile`] over the coarse grid 0.1, 0.2, …, 1.0 plus `base.ea`, then the
+    /// points 0.05 either side of the best one (the profile's minimum and the interval are
+    /// read from this adaptive set).
+    fn profile_adaptive(
+        &self,
+        m: &[f64],
+        r: &[f64],
+        base: ElementParams,
+        res: Option<Resonance>,
+        fixed_res: Option<Resonance>,
+    ) -> Result<Vec<ProfilePoint>> {
+        let mut eas: Vec<f64> = (1..=10).map(|k| 0.1 * k as f64).collect();
+        if eas.iter().all(|x| (x - base.ea).abs() > 1e-9) && base.ea.is_finite() {
+            eas.push(base.ea);
+        }
+        let mut prof = self.profile(m, r, base, &eas, res, fixed_res)?;
+        let best = best_point(&prof).0.ea;
+        let more: Vec<f64> = [best - 0.05, best + 0.05]
+            .into_iter()
+            .filter(|x| (0.1 - 1e-9..=1.0 + 1e-9).contains(x))
+            .filter(|x| prof.iter().all(|p| (p.0.ea - x).abs() > 1e-9))
+            .collect();
+        if !more.is_empty() {
+            prof.extend(self.profile(m, r, base, &more, res, fixed_res)?);
+            prof.sort_by(|a, b| a.0.ea.total_cmp(&b.0.ea));
+        }
+        Ok(prof)
+    }
+}
+
 /// The lowest-RSS point of a profile.
 fn best_point(prof: &[ProfilePoint]) -> ProfilePoint {
     *prof
@@ -439,7 +470,7 @@ pub fn calibrate(
     let f0 = sensor_model(&s0, &r, &sens0);
 
     // Candidate "none": the plain model, ea profiled over the whole grid.
-    let prof_none = sim.profile(&m, &r, p0, &ea_grid(p0.ea), None, None)?;
+    let prof_none = sim.profile_adaptive(&m, &r, p0, None, None)?;
     let (pn, sn, rn) = best_point(&prof_none);
     let resid_none: Vec<f64> = {
         let f = sensor_model(&sim.spectrum(&pn)?, &r, &sn);
@@ -462,12 +493,12 @@ pub fn calibrate(
         .0
         .resonance
         .expect("fitted resonance");
-    let mut prof_res = sim.profile(&m, &r, pn, &ea_grid(p0.ea), Some(res_start), None)?;
+    let mut prof_res = sim.profile_adaptive(&m, &r, p0, Some(res_start), None)?;
     let (pr1, _, _) = best_point(&prof_res);
     if (pr1.ea - pn.ea).abs() > 1e-9 {
         let (again, _) = search_resonance(&m, &sim.spectrum(&pr1)?, &r);
         res_start = again.resonance.expect("fitted resonance");
-        let prof2 = sim.profile(&m, &r, pn, &ea_grid(p0.ea), Some(res_start), None)?;
+        let prof2 = sim.profile_adaptive(&m, &r, p0, Some(res_start), None)?;
         if best_point(&prof2).2 < best_point(&prof_res).2 {
             prof_res = prof2;
         }
@@ -784,14 +815,7 @@ pub fn calibrate(
         (wear_before, sens0, f0.clone(), Vec::new())
     } else {
         let ch = &cands[chosen];
-        let prof = sim.profile(
-            &m,
-            &r,
-            ch.params,
-            &ea_grid(ch.params.ea),
-            ch.sensor.resonance,
-            None,
-        )?;
+        let prof = sim.profile_adaptive(&m, &r, ch.params, ch.sensor.resonance, None)?;
         let pts: Vec<(f64, f64)> = prof.iter().map(|p| (p.0.ea, p.2)).collect();
         let (ea, lo, hi) = profile_interval(&pts, j_eff, level);
         let (pb, sb, _) = best_point(&prof);
@@ -925,7 +949,7 @@ pub fn refit_held(
         tooth_shaft: held.tooth.map_or(0.0, |t| t.1),
         ..p0
     };
-    let prof = sim.profile(&m, &r, base, &ea_grid(ea_start), None, res)?;
+    let prof = sim.profile_adaptive(&m, &r, base, None, res)?;
     let pts: Vec<(f64, f64)> = prof.iter().map(|p| (p.0.ea, p.2)).collect();
     let (ea, ea_lower, ea_upper) =
         profile_interval(&pts, j_eff, opts.diagnose.credible_level);
