@@ -391,7 +391,10 @@ fn report(rows: &[Row], n: usize, base: u64, wall: f64) {
     }
     println!();
     // Targets.
-    let lib_vis: Vec<&&Row> = ok.iter().filter(|r| library(&r.kind) && r.visible).collect();
+    let lib_vis: Vec<&&Row> = ok
+        .iter()
+        .filter(|r| library(&r.kind) && r.visible)
+        .collect();
     let named_right = |r: &Row| {
         let mut a = r.named.clone();
         a.sort();
@@ -423,11 +426,17 @@ fn report(rows: &[Row], n: usize, base: u64, wall: f64) {
     println!("| --- | --- | --- |");
     println!(
         "| library effect named exactly (visible records) | {} | ≥ 90 % |",
-        pct(lib_vis.iter().filter(|r| named_right(r)).count(), lib_vis.len())
+        pct(
+            lib_vis.iter().filter(|r| named_right(r)).count(),
+            lib_vis.len()
+        )
     );
     println!(
         "| library effect named exactly (all records, visible or not) | {} | — |",
-        pct(lib_all.iter().filter(|r| named_right(r)).count(), lib_all.len())
+        pct(
+            lib_all.iter().filter(|r| named_right(r)).count(),
+            lib_all.len()
+        )
     );
     println!(
         "| non-library effect: no library effect claimed and (unexplained reported or not visible) | {} | ≥ 80 % |",
@@ -448,7 +457,10 @@ fn report(rows: &[Row], n: usize, base: u64, wall: f64) {
     );
     println!(
         "| clean: no effect claimed | {} | ≥ 90 % |",
-        pct(clean.iter().filter(|r| r.named.is_empty()).count(), clean.len())
+        pct(
+            clean.iter().filter(|r| r.named.is_empty()).count(),
+            clean.len()
+        )
     );
     println!(
         "| model error after ≤ before | {} | every record |",
@@ -482,7 +494,9 @@ fn report(rows: &[Row], n: usize, base: u64, wall: f64) {
             continue;
         }
         let k = rs.len();
-        let mae = |f: &dyn Fn(&Row) -> f64| rs.iter().map(|r| (f(r) - r.ea).abs()).sum::<f64>() / k as f64;
+        let mae = |f: &dyn Fn(&Row) -> f64| {
+            rs.iter().map(|r| (f(r) - r.ea).abs()).sum::<f64>() / k as f64
+        };
         let cov_b = rs
             .iter()
             .filter(|r| r.ea_before_lower <= r.ea && r.ea <= r.ea_before_upper)
@@ -514,7 +528,9 @@ fn report(rows: &[Row], n: usize, base: u64, wall: f64) {
     }
     println!();
     // Per effect size: library kinds in three bins of their size measure.
-    println!("| kind | size measure | bin | n | visible | named exactly | named exactly when visible |");
+    println!(
+        "| kind | size measure | bin | n | visible | named exactly | named exactly when visible |"
+    );
     println!("| --- | --- | --- | --- | --- | --- | --- |");
     let measures: BTreeMap<&str, &str> = [
         ("path-resonance", "peak gain g"),
@@ -559,7 +575,9 @@ fn report(rows: &[Row], n: usize, base: u64, wall: f64) {
             );
         }
     }
-    println!("(for tone and mains-hum, \"named exactly\" means: nothing claimed and unexplained reported)\n");
+    println!(
+        "(for tone and mains-hum, \"named exactly\" means: nothing claimed and unexplained reported)\n"
+    );
     let res: Vec<&&Row> = ok.iter().filter(|r| r.rho_ratio.is_some()).collect();
     if !res.is_empty() {
         let within = |tol: f64| {

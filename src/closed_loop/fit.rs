@@ -10,7 +10,12 @@ use super::spectrum::grid_index;
 
 /// Levenberg–Marquardt on a residual vector with a forward-difference Jacobian, parameters
 /// clamped to `[lo, hi]`. Returns the parameters and the residual sum of squares.
-pub(crate) fn lm<F: Fn(&[f64]) -> Vec<f64>>(f: F, p0: &[f64], lo: &[f64], hi: &[f64]) -> (Vec<f64>, f64) {
+pub(crate) fn lm<F: Fn(&[f64]) -> Vec<f64>>(
+    f: F,
+    p0: &[f64],
+    lo: &[f64],
+    hi: &[f64],
+) -> (Vec<f64>, f64) {
     let np = p0.len();
     let mut p: Vec<f64> = p0
         .iter()
@@ -166,10 +171,7 @@ pub(crate) fn search_resonance(m: &[f64], s: &[f64], r: &[f64]) -> (SensorFit, f
     scored.sort_by(|a, b| a.1.total_cmp(&b.1));
     let mut starts: Vec<Resonance> = Vec::new();
     for (res, _) in &scored {
-        if starts
-            .iter()
-            .all(|s0| (s0.rho / res.rho).ln().abs() > 0.08)
-        {
+        if starts.iter().all(|s0| (s0.rho / res.rho).ln().abs() > 0.08) {
             starts.push(*res);
         }
         if starts.len() == 4 {
@@ -388,7 +390,13 @@ mod tests {
         let r = super::super::spectrum::grid();
         let s: Vec<f64> = r
             .iter()
-            .map(|x| if ((x * 10.0).round() - x * 10.0).abs() < 0.02 { 0.0 } else { -60.0 })
+            .map(|x| {
+                if ((x * 10.0).round() - x * 10.0).abs() < 0.02 {
+                    0.0
+                } else {
+                    -60.0
+                }
+            })
             .collect();
         let truth = Resonance {
             rho: 0.37,

@@ -1,14 +1,15 @@
 //! A machine's calibrated effects held fixed in later diagnoses (the service's use of
 //! [`super::calibrate`]; see "Through the service" in `docs/closed-loop.md`).
 //!
-//! * A **path resonance** is a sensor/path stage: [`decolour`] divides the record's spectrum
+//! * A **path resonance** is a sensor/path stage: [`decolour`] / [`decolour_with`] divide the record's spectrum
 //!   by the fitted `|H(f)|` (zero phase, whole-record FFT, correction clamped to
 //!   ±[`MAX_CORRECTION_DB`]) so that the ordinary diagnosis reads de-coloured line features.
 //!   The mode is kept in **Hz** (`frequency_hz`), as a housing mode does not move with speed.
-//! * **Element effects** (shaft modulation, planetary wear) cannot enter the signature-table
-//!   likelihood without recomputing the table, so [`refit_held`] re-estimates the wear by the
-//!   closed loop's simulation refinement with the stored effects held at their calibrated
-//!   values (only `ea`, sensor gain and noise floor are fitted).
+//! * **Element effects** (shaft modulation, planetary wear, tooth damage) cannot enter the
+//!   signature-table likelihood without recomputing the table, so [`super::refit_held`]
+//!   re-estimates the wear by the closed loop's wear profile with the stored effects held at
+//!   their calibrated values (only `ea`, sensor gain and noise floor are fitted): a continuous
+//!   estimate with a profile-likelihood interval, which the service's alert level follows.
 
 use std::collections::BTreeMap;
 

@@ -8,17 +8,20 @@
 //! 3. **Fit before**: simulate the model at (ea, Ω1, planetary 0.1) → `S_j`; fit the sensor
 //!    gain `g` and the flat measurement-noise floor `n` by Levenberg–Marquardt on
 //!    `F_j = 10 log10(g² S_j² |H_j|² + n²)` (dB; `H ≡ 1` without a path stage).
-//! 4. **Candidates**: no effect (ea profiled over 0.1, 0.15, …, 1.0 and the table's value), a
+//! 4. **Candidates**: no effect (ea profiled over 0.1, 0.2, …, 1.0, the table's value and ±0.05
+//!    around the best), a
 //!    path resonance searched over the whole band ([`fit::search_resonance`]), each element
 //!    effect (shaft modulation on either shaft of the reference mesh, planetary wear, a damaged
 //!    tooth on either gear of the reference mesh: amplitude scaled from the residual at its
 //!    fingerprint lines, ea profiled locally, amplitude again), and the pairs. Scored by
 //!    `BIC = J_eff ln(RSS/J) + k ln J_eff` with `J_eff` the effective number of independent
 //!    grid points of the plain model's residual ([`fit::effective_points`]).
-//! 5. **Selection**: the lowest BIC of the single effects wins if it beats "no effect" by
+//! 5. **Selection**: only candidates whose improvement falls on their fingerprint
+//!    ([`SUPPORT_SHARE`], see [`Candidate::fingerprint_share`]) are eligible; the lowest BIC of
+//!    the eligible single effects wins if it beats "no effect" by
 //!    [`CalibrateOptions::bic_margin`]; a pair replaces it only if each member is significant
 //!    on its own and the pair beats the best single by that margin.
-//! 6. **Refit**: the chosen model's ea is profiled over the whole grid: `wear_after.ea` is the
+//! 6. **Refit**: the chosen model's ea is profiled the same way: `wear_after.ea` is the
 //!    minimum of a parabola through the best three points (continuous), its interval where the
 //!    profile likelihood ratio `J_eff ln(RSS/RSS_min)` stays below the χ²₁ quantile of the
 //!    credible level ([`fit::profile_interval`]). With no effect claimed the model is
@@ -49,8 +52,8 @@ use crate::signature::precompute::{SimOptions, random_initial, simulate_sensor};
 use crate::signature::{SignatureTable, SplitMix64};
 use crate::solver::Dopri5Options;
 use effects::{
-    Effect, ElementParams, MeshGear, PATH_RESONANCE, PLANETARY_WEAR, Resonance,
-    SHAFT_MODULATION, TOOTH_DAMAGE, build_model, reference_gears, shaft_ratio,
+    Effect, ElementParams, MeshGear, PATH_RESONANCE, PLANETARY_WEAR, Resonance, SHAFT_MODULATION,
+    TOOTH_DAMAGE, build_model, reference_gears, shaft_ratio,
 };
 use fit::{effective_points, fit_sensor, profile_interval, search_resonance, sensor_model};
 use residual::{annotate, fingerprint_gap, residual_features};
@@ -192,7 +195,6 @@ pub struct CalibrationReport {
     pub options: CalibrateOptions,
 }
 
-
 /// Simulated model spectra, cached by parameters.
 struct Simulator<'a> {
     gb: &'a Gearbox,
@@ -267,7 +269,8 @@ impl Simulator<'_> {
                 let s = self.spectrum(&p)?;
                 Ok(match fixed_res {
                     Some(h) => {
-                        let hs: Vec<f64> = s.iter().zip(r).map(|(a, b)| a + h.gain_db(*b)).collect();
+                        let hs: Vec<f64> =
+                            s.iter().zip(r).map(|(a, b)| a + h.gain_db(*b)).collect();
                         let (mut sens, rss) = fit_sensor(m, &hs, r, None);
                         sens.resonance = Some(h);
                         (p, sens, rss)
@@ -416,7 +419,12 @@ fn effect_tooth(depth: f64, gear: &MeshGear) -> Effect {
 }
 
 /// The effects of an element parameter set (given the gears and shafts they name).
-fn element_effects(p: &ElementParams, baseline: f64, gears: &[MeshGear], input: &MeshGear) -> Vec<Effect> {
+fn element_effects(
+    p: &ElementParams,
+    baseline: f64,
+    gears: &[MeshGear],
+    input: &MeshGear,
+) -> Vec<Effect> {
     let mut v = Vec::new();
     if p.eccentricity > 0.0 {
         let sh = gears
@@ -602,14 +610,13 @@ pub fn calibrate(
             effects.push(effect_resonance(&res, f1));
         }
         // gain, noise, ea + one amplitude per element effect + ρ, ζ (and g) of a resonance.
-        let k = 3
-            + effects
-                .iter()
-                .map(|e| match e.name.as_str() {
-                    PATH_RESONANCE => 2 + e.parameters.contains_key("peak_gain") as usize,
-                    _ => 1,
-                })
-                .sum::<usize>();
+        let k = 3 + effects
+            .iter()
+            .map(|e| match e.name.as_str() {
+                PATH_RESONANCE => 2 + e.parameters.contains_key("peak_gain") as usize,
+                _ => 1,
+            })
+            .sum::<usize>();
         Ok(Fitted {
             name,
             effects,
@@ -629,7 +636,9 @@ pub fn calibrate(
         let rss = cands[n_single - singles.len() + k].rss;
         match best_variant.iter().position(|(n, _)| n == name) {
             Some(i) => {
-                let j = singles.iter().position(|(n, q)| n == name && *q == best_variant[i].1);
+                let j = singles
+                    .iter()
+                    .position(|(n, q)| n == name && *q == best_variant[i].1);
                 let old = j.map_or(f64::INFINITY, |j| cands[n_single - singles.len() + j].rss);
                 if rss < old {
                     best_variant[i].1 = *p;
@@ -639,7 +648,11 @@ pub fn calibrate(
         }
     }
     for (name, p) in &best_variant {
-        cands.push(make(format!("{name}+{PATH_RESONANCE}"), *p, Some(res_best))?);
+        cands.push(make(
+            format!("{name}+{PATH_RESONANCE}"),
+            *p,
+            Some(res_best),
+        )?);
     }
     for (i, (na, pa)) in best_variant.iter().enumerate() {
         for (nb, pb) in best_variant.iter().skip(i + 1) {
@@ -729,7 +742,9 @@ pub fn calibrate(
                 TOOTH_DAMAGE => {
                     let comb: Vec<f64> = [1.0, 2.0]
                         .iter()
-                        .flat_map(|c| (1..=5).flat_map(move |n| [c - n as f64 * s, c + n as f64 * s]))
+                        .flat_map(|c| {
+                            (1..=5).flat_map(move |n| [c - n as f64 * s, c + n as f64 * s])
+                        })
                         .collect();
                     near(&comb, &mut mask);
                 }
@@ -889,8 +904,8 @@ pub fn calibrate(
 /// The wear re-estimated with a machine's calibrated effects held fixed ([`refit_held`]).
 #[derive(Debug, Clone, Copy, Serialize)]
 pub struct HeldRefit {
-    /// Fixed-axis wear `ea`: the minimum of the profile over 0.1, 0.15, …, 1.0 plus the start
-    /// (parabola through the best three points; continuous).
+    /// Fixed-axis wear `ea`: the minimum of the profile over 0.1, 0.2, …, 1.0, the start and
+    /// ±0.05 around the best (parabola through the best three points; continuous).
     pub ea: f64,
     /// Profile-likelihood interval of `ea` at the diagnosis's credible level.
     pub ea_lower: f64,
@@ -911,7 +926,7 @@ pub struct HeldRefit {
 
 /// Re-estimate the wear of `record` with `held` in the model: element effects in the
 /// assembly, a path resonance as a fixed sensor stage (its Hz frequency mapped to `f1`).
-/// `ea` is profiled over the same grid as [`calibrate`]'s refit (gain and noise floor by
+/// `ea` is profiled like [`calibrate`]'s refit (gain and noise floor by
 /// Levenberg–Marquardt at each point; nothing about the effects re-fitted), with the same
 /// continuous minimum and profile-likelihood interval.
 pub fn refit_held(
@@ -951,8 +966,7 @@ pub fn refit_held(
     };
     let prof = sim.profile_adaptive(&m, &r, base, None, res)?;
     let pts: Vec<(f64, f64)> = prof.iter().map(|p| (p.0.ea, p.2)).collect();
-    let (ea, ea_lower, ea_upper) =
-        profile_interval(&pts, j_eff, opts.diagnose.credible_level);
+    let (ea, ea_lower, ea_upper) = profile_interval(&pts, j_eff, opts.diagnose.credible_level);
     let (_, _, rss) = best_point(&prof);
     let error_db = (rss / j_n).sqrt();
     if !(error_db.is_finite() && error_plain_db.is_finite() && ea.is_finite()) {

@@ -304,9 +304,12 @@ impl GearOde {
                 freq: freq_index(w),
                 cos_phi: m.phase[j].cos(),
                 sin_phi: m.phase[j].sin(),
-                damage: m.tooth_damage.get(j).copied().flatten().map(|d| {
-                    (d.shaft_ratio * omega1, d.phase / TAU, d)
-                }),
+                damage: m
+                    .tooth_damage
+                    .get(j)
+                    .copied()
+                    .flatten()
+                    .map(|d| (d.shaft_ratio * omega1, d.phase / TAU, d)),
             });
         }
         let mut forcing = Vec::new();

@@ -180,7 +180,10 @@ impl Diagnoser for TableDiagnoser {
             .map(|c| held_effects(c).map(|h| (c, h)))
             .transpose()?;
         // A path stage is divided out of the spectrum before the ordinary feature extraction.
-        let corrected = match held.as_ref().and_then(|(_, h)| h.decolour(&rec.samples, rec.sample_rate)) {
+        let corrected = match held
+            .as_ref()
+            .and_then(|(_, h)| h.decolour(&rec.samples, rec.sample_rate))
+        {
             Some(x) => Some(Record {
                 samples: x?,
                 sample_rate: rec.sample_rate,
