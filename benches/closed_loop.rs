@@ -1,7 +1,7 @@
 //! The closed loop on virtual-rig records with effects drawn at random over wide ranges (not a
 //! timing benchmark): the confusion matrix, error and wear before/after of `docs/closed-loop.md`.
 //!
-//! `cargo bench --bench closed_loop` (env: `CL_N` records, default 220; `CL_SEED` base seed,
+//! `cargo bench --bench closed_loop` (env: `CL_N` records, default 110 (22 min on the shared 2-core machine); `CL_SEED` base seed,
 //! default 2 — seed 1 is the one thresholds may be looked at on, report on another; `CL_OUT`
 //! JSON rows; `CL_KINDS` a comma list to run only some kinds).
 //!
@@ -106,7 +106,7 @@ fn std_diff(a: &[f64], b: &[f64]) -> f64 {
 }
 
 fn main() {
-    let n: usize = env("CL_N", 220);
+    let n: usize = env("CL_N", 110);
     let base: u64 = env("CL_SEED", 2);
     let only: String = env("CL_KINDS", String::new());
     let kinds: Vec<&str> = KINDS
