@@ -205,15 +205,16 @@ pub fn build_model(gb: &Gearbox, p: &ElementParams) -> Result<DimensionlessModel
                 .with_error(amp, 1.0 - s, 0.0);
         }
     }
-    if p.tooth_depth > 0.0 && p.tooth_shaft > 0.0 {
-        if let Some(el) = asm.elements.first_mut() {
-            *el = el.clone().with_tooth_damage(ToothDamage {
-                depth: p.tooth_depth.min(0.95),
-                shaft_ratio: p.tooth_shaft,
-                width: p.tooth_shaft.min(0.5),
-                phase: 0.0,
-            });
-        }
+    if p.tooth_depth > 0.0
+        && p.tooth_shaft > 0.0
+        && let Some(el) = asm.elements.first_mut()
+    {
+        *el = el.clone().with_tooth_damage(ToothDamage {
+            depth: p.tooth_depth.min(0.95),
+            shaft_ratio: p.tooth_shaft,
+            width: p.tooth_shaft.min(0.5),
+            phase: 0.0,
+        });
     }
     asm.resolve()
 }

@@ -96,7 +96,7 @@ pub(crate) fn sensor_model(s: &[f64], r: &[f64], sensor: &SensorFit) -> Vec<f64>
 /// Bounds of a fitted path resonance: `ρ` (units of f1), `ζ`, peak gain `g`.
 pub const RHO_RANGE: (f64, f64) = (0.1, 3.5);
 /// See [`RHO_RANGE`].
-pub const ZETA_RANGE: (f64, f64) = (0.015, 0.5);
+pub const ZETA_RANGE: (f64, f64) = (0.02, 0.5);
 /// See [`RHO_RANGE`].
 pub const PEAK_GAIN_RANGE: (f64, f64) = (0.3, 40.0);
 
@@ -253,10 +253,14 @@ pub fn profile_interval(points: &[(f64, f64)], j_eff: f64, level: f64) -> (f64, 
         let a = (d12 - d01) / (x2 - x0);
         if a > 0.0 {
             let b = d01 - a * (x0 + x1);
-            let v = (-b / (2.0 * a)).clamp(x0, x2);
-            let c = y1 - a * x1 * x1 - b * x1;
-            ea = v;
-            dmin = (a * v * v + b * v + c).min(y1);
+            let v = -b / (2.0 * a);
+            // A vertex outside the bracketing points (close, unequal spacing) is not trusted:
+            // the best simulated point stands.
+            if v > x0 && v < x2 {
+                let c = y1 - a * x1 * x1 - b * x1;
+                ea = v;
+                dmin = (a * v * v + b * v + c).min(y1);
+            }
         }
     }
     let z = normal_quantile(0.5 + level / 2.0);
@@ -294,7 +298,7 @@ pub fn normal_quantile(p: f64) -> f64 {
         -3.969683028665376e1,
         2.209460984245205e2,
         -2.759285104469687e2,
-        1.383577518672690e2,
+        1.383_577_518_672_69e2,
         -3.066479806614716e1,
         2.506628277459239,
     ];

@@ -133,6 +133,11 @@ pub struct Candidate {
 /// Share of a candidate's improvement that must fall on its fingerprint (see [`calibrate`]).
 pub const SUPPORT_SHARE: f64 = 0.25;
 
+/// Lines of the plain model (peaks 6 dB above its noise floor) a path resonance must move by
+/// more than 3 dB relative to f1 to be eligible (its `fingerprint_share` is otherwise reported
+/// as ≤ 0).
+pub const MIN_COLOURED_LINES: usize = 3;
+
 /// A residual feature: a run of grid points beyond the threshold.
 #[derive(Debug, Clone, Serialize)]
 pub struct ResidualFeature {
@@ -764,10 +769,23 @@ pub fn calibrate(
             }
         }
         support[ci] = if tot > 0.0 { inside / tot } else { 0.0 };
+        // A path stage colours what the gearbox makes: it must move at least
+        // [`MIN_COLOURED_LINES`] of the plain model's lines by more than 3 dB relative to f1.
+        // A narrow mode that lifts one weak line next to a tone is a tone, not a path.
+        if let Some(h) = c.sensor.resonance {
+            let h1 = h.gain_db(1.0);
+            let coloured = line_peaks
+                .iter()
+                .filter(|&&x| (h.gain_db(x) - h1).abs() > 3.0)
+                .count();
+            if coloured < MIN_COLOURED_LINES {
+                support[ci] = support[ci].min(0.0);
+            }
+        }
     }
 
-    // Selection. J_eff: the larger of the plain model's and the best candidate's residual
-    // (an effect present makes the plain residual smooth, which would hide its own evidence).
+    // Selection: BIC over the J grid points (J_eff, the larger of the plain model's and the best
+    // candidate's effective count, is used for the wear interval only).
     let best_c = (0..cands.len())
         .min_by(|&a, &b| cands[a].rss.total_cmp(&cands[b].rss))
         .expect("candidates");
@@ -777,7 +795,7 @@ pub fn calibrate(
         let rc: Vec<f64> = m.iter().zip(&fc).map(|(a, b)| a - b).collect();
         j_eff.max(effective_points(&rc))
     };
-    let bic = |rss: f64, k: usize| j_eff * (rss / j_n).max(1e-300).ln() + k as f64 * j_eff.ln();
+    let bic = |rss: f64, k: usize| j_n * (rss / j_n).max(1e-300).ln() + k as f64 * j_n.ln();
     let scores: Vec<f64> = cands.iter().map(|c| bic(c.rss, c.k)).collect();
     let bic0 = scores[0];
     let eligible = |i: usize| support[i] >= SUPPORT_SHARE;
