@@ -174,7 +174,7 @@ fn main() {
                     truth.push("tooth-damage".into());
                 }
                 "pair" => {
-                    if i / kinds.len() % 2 == 0 {
+                    if (i / kinds.len()).is_multiple_of(2) {
                         size = draw_shaft(&mut rng, &mut e);
                         truth.push("shaft-modulation".into());
                     } else {
