@@ -132,8 +132,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         if std::env::var("CL_VERBOSE").is_ok() {
             for c in &rep.candidates {
                 eprintln!(
-                    "   {:40} err {:6.2} dBIC {:8.1}",
-                    c.name, c.error_db, c.delta_bic
+                    "   {:40} err {:6.2} dBIC {:8.1} fingerprint share {:5.2}",
+                    c.name, c.error_db, c.delta_bic, c.fingerprint_share
                 );
             }
         }

@@ -11,6 +11,11 @@ use gearwear::signature::table::DEFAULT_TABLE_PATH;
 const EA: f64 = 0.3;
 
 fn run(effects: RigEffects, seed: u64, gain: f64) -> CalibrationReport {
+    run_with(effects, seed, gain, None)
+}
+
+/// `run` with the input-shaft rate given (Ω1 = 1 is 30 Hz on the paper's rig).
+fn run_with(effects: RigEffects, seed: u64, gain: f64, shaft_hz: Option<f64>) -> CalibrationReport {
     let table = SignatureTable::load(std::path::Path::new(DEFAULT_TABLE_PATH)).unwrap();
     let spec = RigSpec {
         ea: EA,
@@ -23,7 +28,9 @@ fn run(effects: RigEffects, seed: u64, gain: f64) -> CalibrationReport {
         effects,
     };
     let rec = generate(table.gearbox(), &spec).unwrap();
-    calibrate(&rec, &table, &CalibrateOptions::default()).unwrap()
+    let mut opts = CalibrateOptions::default();
+    opts.diagnose.shaft_hz = shaft_hz;
+    calibrate(&rec, &table, &opts).unwrap()
 }
 
 fn names(r: &CalibrationReport) -> Vec<&str> {
@@ -121,6 +128,104 @@ fn a_tone_outside_the_library_is_unexplained() {
         r.unexplained.iter().any(|u| u.kind == "extra"
             && (u.frequency_ratio - 1.27).abs() < 0.02
             && u.size_db > 10.0),
+        "{:?}",
+        r.unexplained
+    );
+}
+
+#[test]
+fn refit_wear_is_continuous_with_a_real_interval() {
+    // The eccentricity record of the test above: an element effect is claimed, so the wear is
+    // refitted by the profile likelihood.
+    let r = run(
+        RigEffects {
+            eccentricity: Some(0.1),
+            ..Default::default()
+        },
+        2001,
+        40.0,
+    );
+    let w = &r.wear_after;
+    assert_eq!(w.method, "profile-likelihood");
+    assert!(
+        w.ea_lower <= w.ea && w.ea <= w.ea_upper,
+        "interval [{}, {}] around {}",
+        w.ea_lower,
+        w.ea_upper,
+        w.ea
+    );
+    assert!(w.ea_upper - w.ea_lower > 0.005, "{w:?}");
+    assert!(w.ea_lower <= EA + 0.02 && EA - 0.02 <= w.ea_upper, "{w:?}");
+}
+
+#[test]
+#[ignore = "not met by the final selection: the mode at 0.45 f1 moves fewer than \
+            MIN_COLOURED_LINES model lines and is not claimed (docs/closed-loop.md, Weak or missing)"]
+fn a_resonance_below_the_mesh_is_named_at_its_frequency() {
+    // A peaking mode at 0.45 f1 (Q 10, peak gain 6): far from the old single starting guess.
+    // The shaft rate is given: without it the tacho-less f1 search of the diagnosis picked
+    // f1/2 on this record (the mode lifts the sub-mesh lines), which is not what this tests.
+    let r = run_with(
+        RigEffects {
+            path_peak: Some((0.45, 0.05, 6.0)),
+            ..Default::default()
+        },
+        2005,
+        3.0,
+        Some(30.0),
+    );
+    assert_eq!(names(&r), vec!["path-resonance"], "{:?}", r.candidates);
+    let p = &r.effects[0].parameters;
+    assert!(
+        (p["frequency_ratio"] / 0.45 - 1.0).abs() < 0.05,
+        "fitted {p:?}"
+    );
+    assert!(r.error_after < r.error_before);
+}
+
+/// What the loop does with a damaged tooth today (docs/closed-loop.md: tooth damage is rarely
+/// named exactly; shaft modulation at the damaged gear's shaft is the usual answer): an element
+/// effect at the damaged gear's shaft is claimed and the error drops.
+#[test]
+fn a_damaged_tooth_is_claimed_at_its_shaft() {
+    let table = SignatureTable::load(std::path::Path::new(DEFAULT_TABLE_PATH)).unwrap();
+    let gears = gearwear::closed_loop::effects::reference_gears(table.gearbox());
+    let pinion = &gears[0];
+    let r = run(
+        RigEffects {
+            tooth: Some((pinion.shaft_ratio, 0.6)),
+            ..Default::default()
+        },
+        2006,
+        2.0,
+    );
+    assert!(
+        r.effects.iter().any(|e| e.kind == "element"
+            && (e.name == "tooth-damage" || e.name == "shaft-modulation")
+            && e.labels.get("shaft") == Some(&pinion.shaft)),
+        "{:?}",
+        r.effects
+    );
+    assert!(r.error_after < r.error_before);
+}
+
+#[test]
+fn mains_hum_is_unexplained_and_called_electrical_pickup() {
+    let r = run(
+        RigEffects {
+            mains: Some((50.0, -15.0)),
+            ..Default::default()
+        },
+        2007,
+        0.5,
+    );
+    assert!(r.effects.is_empty(), "misattributed to {:?}", names(&r));
+    assert!(
+        r.unexplained
+            .iter()
+            .filter(|u| u.guess.contains("mains"))
+            .count()
+            >= 2,
         "{:?}",
         r.unexplained
     );

@@ -1,5 +1,6 @@
 //! The documented steps of docs/gearbox.md for each committed description besides the paper's
-//! rig: describe, kinematics, precompute a small table, synthesise a record, diagnose it.
+//! rig: describe, kinematics, precompute a small table, synthesise a record, diagnose it, close
+//! the loop on it (`calibrate --gearbox`).
 
 use std::process::Command;
 
@@ -89,6 +90,35 @@ fn round_trip(name: &str) {
     assert!(
         (got_f1 / f1 - 1.0).abs() < 0.005,
         "{name}: f1 {got_f1} vs {f1}"
+    );
+    // The closed loop runs on this gearbox: the model error does not grow and the refitted
+    // wear is a number with an interval around it.
+    let c: serde_json::Value = serde_json::from_str(&gearwear(&[
+        "calibrate",
+        "--gearbox",
+        &g,
+        "--table",
+        table.to_str().unwrap(),
+        "--input",
+        rec.to_str().unwrap(),
+        "--shaft-hz",
+        "25",
+    ]))
+    .unwrap();
+    let (before, after) = (
+        c["error_before"].as_f64().unwrap(),
+        c["error_after"].as_f64().unwrap(),
+    );
+    assert!(after <= before + 1e-9, "{name}: error {before} → {after}");
+    let w = &c["wear_after"];
+    let (ea, lo, hi) = (
+        w["ea"].as_f64().unwrap(),
+        w["ea_lower"].as_f64().unwrap(),
+        w["ea_upper"].as_f64().unwrap(),
+    );
+    assert!(
+        lo <= ea && ea <= hi && (0.1..=1.0).contains(&ea),
+        "{name}: {w}"
     );
     // The table of another gearbox is refused as stale.
     let other = if name == "spur-pair" {

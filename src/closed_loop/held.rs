@@ -1,20 +1,21 @@
 //! A machine's calibrated effects held fixed in later diagnoses (the service's use of
 //! [`super::calibrate`]; see "Through the service" in `docs/closed-loop.md`).
 //!
-//! * A **path resonance** is a sensor/path stage: [`decolour`] divides the record's spectrum
+//! * A **path resonance** is a sensor/path stage: [`decolour`] / [`decolour_with`] divide the record's spectrum
 //!   by the fitted `|H(f)|` (zero phase, whole-record FFT, correction clamped to
 //!   ±[`MAX_CORRECTION_DB`]) so that the ordinary diagnosis reads de-coloured line features.
 //!   The mode is kept in **Hz** (`frequency_hz`), as a housing mode does not move with speed.
-//! * **Element effects** (shaft modulation, planetary wear) cannot enter the signature-table
-//!   likelihood without recomputing the table, so [`refit_held`] re-estimates the wear by the
-//!   closed loop's simulation refinement with the stored effects held at their calibrated
-//!   values (only `ea`, sensor gain and noise floor are fitted).
+//! * **Element effects** (shaft modulation, planetary wear, tooth damage) cannot enter the
+//!   signature-table likelihood without recomputing the table, so [`super::refit_held`]
+//!   re-estimates the wear by the closed loop's wear profile with the stored effects held at
+//!   their calibrated values (only `ea`, sensor gain and noise floor are fitted): a continuous
+//!   estimate with a profile-likelihood interval, which the service's alert level follows.
 
 use std::collections::BTreeMap;
 
 use serde::Serialize;
 
-use super::effects::{PATH_RESONANCE, PLANETARY_WEAR, Resonance, SHAFT_MODULATION};
+use super::effects::{PATH_RESONANCE, PLANETARY_WEAR, Resonance, SHAFT_MODULATION, TOOTH_DAMAGE};
 use crate::error::{Error, Result};
 
 /// Largest |correction| (dB) [`decolour`] applies at any frequency: far above a resonance
@@ -26,10 +27,17 @@ pub const MAX_CORRECTION_DB: f64 = 30.0;
 pub struct HeldEffects {
     /// Shaft-modulation sideband amplitude on mesh x1 (units of b); 0: none.
     pub eccentricity_b: f64,
+    /// The modulating shaft's rate over f1 (`None`: the input shaft, as stored before the
+    /// shaft was a choice).
+    pub eccentricity_shaft_ratio: Option<f64>,
     /// Planetary composite-error amplitude (units of b); `None`: the model's baseline.
     pub planetary_error_b: Option<f64>,
     /// Path resonance `(frequency Hz, damping ratio)`.
     pub path_resonance: Option<(f64, f64)>,
+    /// The resonance's peak gain over the flat path (peaking form); `None`: the low-pass form.
+    pub path_peak_gain: Option<f64>,
+    /// A damaged tooth: (stiffness loss, its shaft's rate over f1).
+    pub tooth: Option<(f64, f64)>,
 }
 
 impl HeldEffects {
@@ -46,11 +54,16 @@ impl HeldEffects {
                 })
             };
             match name {
-                SHAFT_MODULATION => h.eccentricity_b = get("sideband_amplitude_b")?,
+                SHAFT_MODULATION => {
+                    h.eccentricity_b = get("sideband_amplitude_b")?;
+                    h.eccentricity_shaft_ratio = get("shaft_ratio").ok();
+                }
                 PLANETARY_WEAR => h.planetary_error_b = Some(get("planetary_error_b")?),
                 PATH_RESONANCE => {
-                    h.path_resonance = Some((get("frequency_hz")?, get("damping_ratio")?))
+                    h.path_resonance = Some((get("frequency_hz")?, get("damping_ratio")?));
+                    h.path_peak_gain = get("peak_gain").ok();
                 }
+                TOOTH_DAMAGE => h.tooth = Some((get("stiffness_loss")?, get("shaft_ratio")?)),
                 other => {
                     return Err(Error::Signal(format!("unknown stored effect `{other}`")));
                 }
@@ -64,10 +77,24 @@ impl HeldEffects {
         *self == HeldEffects::default()
     }
 
+    /// True when an element effect (shaft modulation, planetary wear, tooth damage) is held:
+    /// the signature table cannot represent it, so the refit's wear is the machine's wear.
+    pub fn has_element_effect(&self) -> bool {
+        self.eccentricity_b > 0.0 || self.planetary_error_b.is_some() || self.tooth.is_some()
+    }
+
     /// The path stage at stage-1 mesh frequency `f1` (Hz).
     pub fn resonance_at(&self, f1: f64) -> Option<Resonance> {
-        self.path_resonance
-            .map(|(fr, zeta)| Resonance { rho: fr / f1, zeta })
+        self.path_resonance.map(|(fr, zeta)| Resonance {
+            rho: fr / f1,
+            zeta,
+            peak_gain: self.path_peak_gain,
+        })
+    }
+
+    /// The record de-coloured by the held path stage ([`decolour_with`]); `None` without one.
+    pub fn decolour(&self, x: &[f64], fs: f64) -> Option<Result<Vec<f64>>> {
+        self.resonance_at(1.0).map(|h| decolour_with(x, fs, &h))
     }
 }
 
@@ -75,6 +102,12 @@ impl HeldEffects {
 /// damping `zeta` (zero phase; the correction at each frequency clamped to
 /// ±[`MAX_CORRECTION_DB`]).
 pub fn decolour(x: &[f64], fs: f64, fr_hz: f64, zeta: f64) -> Result<Vec<f64>> {
+    decolour_with(x, fs, &Resonance::low_pass(fr_hz, zeta))
+}
+
+/// [`decolour`] for a resonance of either form, `h.rho` in **Hz** (not a ratio to f1).
+pub fn decolour_with(x: &[f64], fs: f64, h: &Resonance) -> Result<Vec<f64>> {
+    let (fr_hz, zeta) = (h.rho, h.zeta);
     if !(fr_hz > 0.0 && zeta > 0.0 && fs > 0.0) {
         return Err(Error::param(
             "path resonance",
@@ -93,7 +126,6 @@ pub fn decolour(x: &[f64], fs: f64, fr_hz: f64, zeta: f64) -> Result<Vec<f64>> {
     let mut spec = fwd.make_output_vec();
     fwd.process(&mut input, &mut spec)
         .map_err(|e| Error::Signal(format!("FFT: {e}")))?;
-    let h = Resonance { rho: fr_hz, zeta };
     for (k, c) in spec.iter_mut().enumerate() {
         let f = k as f64 * fs / n as f64;
         let corr = (-h.gain_db(f)).clamp(-MAX_CORRECTION_DB, MAX_CORRECTION_DB);

@@ -8,20 +8,31 @@
 //! 3. **Fit before**: simulate the model at (ea, Ω1, planetary 0.1) → `S_j`; fit the sensor
 //!    gain `g` and the flat measurement-noise floor `n` by Levenberg–Marquardt on
 //!    `F_j = 10 log10(g² S_j² |H_j|² + n²)` (dB; `H ≡ 1` without a path stage).
-//! 4. **Candidates**: no effect, each effect of [`effects`] and the pairs, each fitted
-//!    (resonance by grid + LM on the spectrum, element effects by re-simulation with the
-//!    amplitude scaled from the residual at their fingerprint lines), scored by
-//!    `BIC = J ln(RSS/J) + k ln J` (J grid points, k fitted parameters).
-//! 5. **Selection**: the lowest BIC of the single effects wins if it beats "no effect" by
+//! 4. **Candidates**: no effect (ea profiled over 0.1, 0.2, …, 1.0, the table's value and ±0.05
+//!    around the best), a
+//!    path resonance searched over the whole band ([`fit::search_resonance`]), each element
+//!    effect (shaft modulation on either shaft of the reference mesh, planetary wear, a damaged
+//!    tooth on either gear of the reference mesh: amplitude scaled from the residual at its
+//!    fingerprint lines, ea profiled locally, amplitude again), and the pairs. Scored by
+//!    `BIC = J_eff ln(RSS/J) + k ln J_eff` with `J_eff` the effective number of independent
+//!    grid points of the plain model's residual ([`fit::effective_points`]).
+//! 5. **Selection**: only candidates whose improvement falls on their fingerprint
+//!    ([`SUPPORT_SHARE`], see [`Candidate::fingerprint_share`]) are eligible; the lowest BIC of
+//!    the eligible single effects wins if it beats "no effect" by
 //!    [`CalibrateOptions::bic_margin`]; a pair replaces it only if each member is significant
 //!    on its own and the pair beats the best single by that margin.
-//! 6. **Refit**: the chosen effect enters the model; the wear is re-estimated (line features
-//!    de-coloured by a path stage before the table likelihood) and everything is re-simulated
-//!    and re-fitted.
-//! 7. **Unexplained**: runs of the final residual beyond ±[`CalibrateOptions::unexplained_db`].
+//! 6. **Refit**: the chosen model's ea is profiled the same way: `wear_after.ea` is the
+//!    minimum of a parabola through the best three points (continuous), its interval where the
+//!    profile likelihood ratio `J_eff ln(RSS/RSS_min)` stays below the χ²₁ quantile of the
+//!    credible level ([`fit::profile_interval`]). With no effect claimed the model is
+//!    unchanged and `wear_after` is the table's estimate.
+//! 7. **Unexplained**: runs of the final residual beyond ±[`CalibrateOptions::unexplained_db`],
+//!    each with a plain-words guess ([`residual::annotate`]).
 
 pub mod effects;
+pub mod fit;
 pub mod held;
+pub mod residual;
 pub mod spectrum;
 pub mod virtual_rig;
 
@@ -29,23 +40,23 @@ use std::collections::{BTreeMap, HashMap};
 use std::sync::Mutex;
 
 use rayon::prelude::*;
-use std::f64::consts::{LN_10, TAU};
+use std::f64::consts::TAU;
 
-use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
-use crate::diagnosis::{DiagnoseOptions, Matcher, diagnose, posterior};
+use crate::diagnosis::{DiagnoseOptions, diagnose};
 use crate::error::{Error, Result};
 use crate::gearbox::Gearbox;
 use crate::record::Record;
-use crate::signal::lines::measure_lines;
 use crate::signature::precompute::{SimOptions, random_initial, simulate_sensor};
-use crate::signature::{SignatureTable, SplitMix64, line_ratios};
+use crate::signature::{SignatureTable, SplitMix64};
 use crate::solver::Dopri5Options;
 use effects::{
-    Effect, ElementParams, PATH_RESONANCE, PLANETARY_WEAR, Resonance, SHAFT_MODULATION,
-    build_model, shaft_ratio,
+    Effect, ElementParams, MeshGear, PATH_RESONANCE, PLANETARY_WEAR, Resonance, SHAFT_MODULATION,
+    TOOTH_DAMAGE, build_model, reference_gears, shaft_ratio,
 };
+use fit::{effective_points, fit_sensor, profile_interval, search_resonance, sensor_model};
+use residual::{annotate, fingerprint_gap, residual_features};
 use spectrum::{grid, grid_index, log_spectrum, rms_distance, running_median};
 
 /// Tuning of [`calibrate`].
@@ -80,11 +91,14 @@ impl Default for CalibrateOptions {
 pub struct WearEstimate {
     /// Fixed-axis wear degree (units of b = 5 µm).
     pub ea: f64,
-    /// Credible interval of `ea` from the table likelihood.
+    /// Interval of `ea` at the diagnosis's credible level: the table posterior's (before, and
+    /// after when no effect was claimed) or the profile likelihood's of the refit.
     pub ea_lower: f64,
     pub ea_upper: f64,
     /// Planetary composite-error amplitude (units of b; baseline 0.1).
     pub planetary: f64,
+    /// Where `ea` and its interval come from: `table-posterior` or `profile-likelihood`.
+    pub method: &'static str,
 }
 
 /// The fitted sensor: gain and flat noise floor (dB of the record's unit, the gain relative to
@@ -111,7 +125,18 @@ pub struct Candidate {
     pub bic: f64,
     /// BIC minus the BIC of `none` (negative: better).
     pub delta_bic: f64,
+    /// Share of its RSS improvement over `none` that falls on its fingerprint points (it is
+    /// eligible only from [`SUPPORT_SHARE`] on; 1 for `none`).
+    pub fingerprint_share: f64,
 }
+
+/// Share of a candidate's improvement that must fall on its fingerprint (see [`calibrate`]).
+pub const SUPPORT_SHARE: f64 = 0.25;
+
+/// Lines of the plain model (peaks 6 dB above its noise floor) a path resonance must move by
+/// more than 3 dB relative to f1 to be eligible (its `fingerprint_share` is otherwise reported
+/// as ≤ 0).
+pub const MIN_COLOURED_LINES: usize = 3;
 
 /// A residual feature: a run of grid points beyond the threshold.
 #[derive(Debug, Clone, Serialize)]
@@ -128,6 +153,9 @@ pub struct ResidualFeature {
     pub level_db: f64,
     /// Width of the run (units of f1).
     pub width_ratio: f64,
+    /// A plain-words guess at its cause ([`residual::annotate`]); for the features of the
+    /// final model only (empty before).
+    pub guess: String,
 }
 
 /// The spectra behind the report, dB re the measured f1 line, on [`spectrum::grid`].
@@ -154,6 +182,9 @@ pub struct CalibrationReport {
     pub unexplained: Vec<ResidualFeature>,
     /// Residual features of the plain model (before).
     pub residual_features_before: Vec<ResidualFeature>,
+    /// Effective number of independent grid points of the plain model's residual (the `J_eff`
+    /// of the BIC and of the wear interval).
+    pub effective_points: f64,
     /// RMS log-spectral distance before / after (dB, see [`spectrum`]).
     pub error_before: f64,
     pub error_after: f64,
@@ -175,17 +206,26 @@ struct Simulator<'a> {
     omega1: f64,
     periods: usize,
     seed: u64,
-    cache: Mutex<HashMap<[u64; 3], Vec<f64>>>,
+    cache: Mutex<HashMap<[u64; 6], Vec<f64>>>,
 }
 
+/// One point of a wear profile: the element parameters, the fitted sensor and the RSS.
+type ProfilePoint = (ElementParams, SensorFit, f64);
+
 impl Simulator<'_> {
+    fn new<'a>(gb: &'a Gearbox, omega1: f64, opts: &CalibrateOptions) -> Simulator<'a> {
+        Simulator {
+            gb,
+            omega1,
+            periods: opts.sim_periods,
+            seed: opts.sim_seed,
+            cache: Mutex::new(HashMap::new()),
+        }
+    }
+
     /// Model spectrum (dB, dimensionless ẍ̄1) on the grid.
     fn spectrum(&self, p: &ElementParams) -> Result<Vec<f64>> {
-        let key = [
-            p.ea.to_bits(),
-            p.planetary.to_bits(),
-            p.eccentricity.to_bits(),
-        ];
+        let key = p.key();
         if let Some(s) = self.cache.lock().expect("cache lock").get(&key) {
             return Ok(s.clone());
         }
@@ -215,231 +255,104 @@ impl Simulator<'_> {
         Ok(s)
     }
 
-    /// Refine `ea` by simulation: the grid `EA_GRID` plus `base.ea`, the sensor (and a path
-    /// resonance starting at `res`) re-fitted at each; the lowest RSS wins.
-    fn best_over_ea(
+    /// The residual over `eas` with everything else of `base` held: at each ea the model is
+    /// simulated and the sensor fitted (a path resonance `res`, when given, re-fitted from
+    /// there; `fixed_res` held fixed instead). In parallel (rayon), sorted by ea.
+    fn profile(
+        &self,
+        m: &[f64],
+        r: &[f64],
+        base: ElementParams,
+        eas: &[f64],
+        res: Option<Resonance>,
+        fixed_res: Option<Resonance>,
+    ) -> Result<Vec<ProfilePoint>> {
+        let mut out: Vec<ProfilePoint> = eas
+            .par_iter()
+            .map(|&ea| {
+                let p = ElementParams { ea, ..base };
+                let s = self.spectrum(&p)?;
+                Ok(match fixed_res {
+                    Some(h) => {
+                        let hs: Vec<f64> =
+                            s.iter().zip(r).map(|(a, b)| a + h.gain_db(*b)).collect();
+                        let (mut sens, rss) = fit_sensor(m, &hs, r, None);
+                        sens.resonance = Some(h);
+                        (p, sens, rss)
+                    }
+                    None => {
+                        let (sens, rss) = fit_sensor(m, &s, r, res);
+                        (p, sens, rss)
+                    }
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        out.sort_by(|a, b| a.0.ea.total_cmp(&b.0.ea));
+        Ok(out)
+    }
+}
+
+impl Simulator<'_> {
+    /// [`Simulator::profile`] over the coarse grid 0.1, 0.2, …, 1.0 plus `base.ea`, then the
+    /// points 0.05 either side of the best one (the profile's minimum and the interval are
+    /// read from this adaptive set).
+    fn profile_adaptive(
         &self,
         m: &[f64],
         r: &[f64],
         base: ElementParams,
         res: Option<Resonance>,
-    ) -> Result<(ElementParams, SensorFit, f64)> {
-        let mut eas: Vec<f64> = (0..EA_GRID_N).map(|k| 0.1 + 0.05 * k as f64).collect();
-        eas.push(base.ea);
-        let fits: Vec<Result<(ElementParams, SensorFit, f64)>> = eas
-            .par_iter()
-            .map(|&ea| {
-                let p = ElementParams { ea, ..base };
-                let s = self.spectrum(&p)?;
-                let (sens, rss) = fit_sensor(m, &s, r, res);
-                Ok((p, sens, rss))
-            })
-            .collect();
-        let mut best: Option<(ElementParams, SensorFit, f64)> = None;
-        for f in fits {
-            let f = f?;
-            if best.as_ref().is_none_or(|b| f.2 < b.2) {
-                best = Some(f);
-            }
+        fixed_res: Option<Resonance>,
+    ) -> Result<Vec<ProfilePoint>> {
+        let mut eas: Vec<f64> = (1..=10).map(|k| 0.1 * k as f64).collect();
+        if eas.iter().all(|x| (x - base.ea).abs() > 1e-9) && base.ea.is_finite() {
+            eas.push(base.ea);
         }
-        Ok(best.expect("non-empty ea grid"))
+        let mut prof = self.profile(m, r, base, &eas, res, fixed_res)?;
+        let best = best_point(&prof).0.ea;
+        let more: Vec<f64> = [best - 0.05, best + 0.05]
+            .into_iter()
+            .filter(|x| (0.1 - 1e-9..=1.0 + 1e-9).contains(x))
+            .filter(|x| prof.iter().all(|p| (p.0.ea - x).abs() > 1e-9))
+            .collect();
+        if !more.is_empty() {
+            prof.extend(self.profile(m, r, base, &more, res, fixed_res)?);
+            prof.sort_by(|a, b| a.0.ea.total_cmp(&b.0.ea));
+        }
+        Ok(prof)
     }
+}
+
+/// The lowest-RSS point of a profile.
+fn best_point(prof: &[ProfilePoint]) -> ProfilePoint {
+    *prof
+        .iter()
+        .min_by(|a, b| a.2.total_cmp(&b.2))
+        .expect("non-empty profile")
 }
 
 /// Number of points of the ea refinement grid 0.1, 0.15, …, 1.0.
 const EA_GRID_N: usize = 19;
 
-/// Levenberg–Marquardt on a residual vector with a forward-difference Jacobian, parameters
-/// clamped to `[lo, hi]`. Returns the parameters and the residual sum of squares.
-fn lm<F: Fn(&[f64]) -> Vec<f64>>(f: F, p0: &[f64], lo: &[f64], hi: &[f64]) -> (Vec<f64>, f64) {
-    let np = p0.len();
-    let mut p: Vec<f64> = p0
-        .iter()
-        .zip(lo.iter().zip(hi))
-        .map(|(v, (a, b))| v.clamp(*a, *b))
+/// The full wear grid 0.1, 0.15, …, 1.0 plus `start`.
+fn ea_grid(start: f64) -> Vec<f64> {
+    let mut v: Vec<f64> = (0..EA_GRID_N).map(|k| 0.1 + 0.05 * k as f64).collect();
+    if v.iter().all(|x| (x - start).abs() > 1e-9) && start.is_finite() {
+        v.push(start);
+    }
+    v
+}
+
+/// The grid points within ±0.05 of `centre`, plus `centre` (a local profile).
+fn ea_window(centre: f64) -> Vec<f64> {
+    let mut v: Vec<f64> = ea_grid(centre)
+        .into_iter()
+        .filter(|x| (x - centre).abs() <= 0.05 + 1e-9)
         .collect();
-    let mut r = f(&p);
-    let mut cost: f64 = r.iter().map(|v| v * v).sum();
-    let mut lambda = 1e-2;
-    for _ in 0..60 {
-        let m = r.len();
-        let mut j = DMatrix::<f64>::zeros(m, np);
-        for k in 0..np {
-            let h = 1e-5 * (1.0 + p[k].abs());
-            let mut q = p.clone();
-            q[k] += h;
-            let rq = f(&q);
-            for i in 0..m {
-                j[(i, k)] = (rq[i] - r[i]) / h;
-            }
-        }
-        let rv = DVector::from_vec(r.clone());
-        let jtj = j.transpose() * &j;
-        let g = j.transpose() * rv;
-        let mut improved = false;
-        for _ in 0..8 {
-            let mut a = jtj.clone();
-            for k in 0..np {
-                a[(k, k)] += lambda * (jtj[(k, k)] + 1e-9);
-            }
-            let Some(step) = a.lu().solve(&(-&g)) else {
-                lambda *= 10.0;
-                continue;
-            };
-            let q: Vec<f64> = (0..np)
-                .map(|k| (p[k] + step[k]).clamp(lo[k], hi[k]))
-                .collect();
-            let rq = f(&q);
-            let c: f64 = rq.iter().map(|v| v * v).sum();
-            if c < cost {
-                let rel = (cost - c) / cost.max(1e-300);
-                p = q;
-                r = rq;
-                cost = c;
-                lambda = (lambda * 0.3).max(1e-9);
-                improved = true;
-                if rel < 1e-9 {
-                    return (p, cost);
-                }
-                break;
-            }
-            lambda *= 10.0;
-        }
-        if !improved {
-            break;
-        }
+    if v.iter().all(|x| (x - centre).abs() > 1e-9) {
+        v.push(centre);
     }
-    (p, cost)
-}
-
-/// `10 log10(10^(a/10) + 10^(b/10))`.
-fn db_add(a: f64, b: f64) -> f64 {
-    let m = a.max(b);
-    m + 10.0 * (10f64.powf((a - m) / 10.0) + 10f64.powf((b - m) / 10.0)).log10()
-}
-
-/// The fitted spectrum `F_j` (dB) of a model spectrum `s` through a sensor.
-fn sensor_model(s: &[f64], r: &[f64], sensor: &SensorFit) -> Vec<f64> {
-    s.iter()
-        .zip(r)
-        .map(|(sj, rj)| {
-            let h = sensor.resonance.map_or(0.0, |res| res.gain_db(*rj));
-            db_add(sensor.gain_db + sj + h, sensor.noise_db)
-        })
-        .collect()
-}
-
-/// Fit gain and noise (and, with `resonance`, the resonance starting there) of `s` to `m`.
-fn fit_sensor(m: &[f64], s: &[f64], r: &[f64], resonance: Option<Resonance>) -> (SensorFit, f64) {
-    let i1 = grid_index(1.0).unwrap_or(0);
-    let g0 = m[i1] - s[i1];
-    let mut sorted = m.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    let n0 = sorted[sorted.len() / 2];
-    let make = |p: &[f64]| SensorFit {
-        gain_db: p[0],
-        noise_db: p[1],
-        resonance: (p.len() == 4).then(|| Resonance {
-            rho: p[2].exp(),
-            zeta: p[3].exp(),
-        }),
-    };
-    let resid = |p: &[f64]| -> Vec<f64> {
-        let f = sensor_model(s, r, &make(p));
-        m.iter().zip(&f).map(|(a, b)| a - b).collect()
-    };
-    let (p, rss) = match resonance {
-        None => lm(resid, &[g0, n0], &[-400.0, -400.0], &[400.0, 400.0]),
-        Some(res) => lm(
-            resid,
-            &[g0, n0, res.rho.ln(), res.zeta.ln()],
-            &[-400.0, -400.0, 0.04f64.ln(), 0.02f64.ln()],
-            &[400.0, 400.0, 3.0f64.ln(), 0.5f64.ln()],
-        ),
-    };
-    (make(&p), rss)
-}
-
-/// Fit a path resonance: coarse grid over (ρ, ζ), then LM from the best.
-fn fit_resonance(m: &[f64], s: &[f64], r: &[f64]) -> (SensorFit, f64) {
-    let mut best: Option<(SensorFit, f64)> = None;
-    for i in 0..36 {
-        let rho = 0.08 * (2.8f64 / 0.08).powf(i as f64 / 35.0);
-        for zeta in [0.03, 0.08, 0.2] {
-            let res = Resonance { rho, zeta };
-            // Gain and noise only at the grid point (fast), full LM at the best.
-            let hs: Vec<f64> = s.iter().zip(r).map(|(a, b)| a + res.gain_db(*b)).collect();
-            let (fit, rss) = fit_sensor(m, &hs, r, None);
-            if best.as_ref().is_none_or(|b| rss < b.1) {
-                best = Some((
-                    SensorFit {
-                        resonance: Some(res),
-                        ..fit
-                    },
-                    rss,
-                ));
-            }
-        }
-    }
-    let (start, _) = best.expect("non-empty grid");
-    fit_sensor(m, s, r, start.resonance)
-}
-
-/// Lines of one residual beyond ±`thr` dB (runs, reported at their extreme point).
-fn residual_features(
-    resid: &[f64],
-    measured_rel: &[f64],
-    r: &[f64],
-    f1: f64,
-    thr: f64,
-) -> Vec<ResidualFeature> {
-    let mut out = Vec::new();
-    let mut j = 0;
-    while j < resid.len() {
-        let sign = if resid[j] > thr {
-            1.0
-        } else if resid[j] < -thr {
-            -1.0
-        } else {
-            j += 1;
-            continue;
-        };
-        let start = j;
-        let mut best = j;
-        while j < resid.len() && sign * resid[j] > thr {
-            if sign * resid[j] > sign * resid[best] {
-                best = j;
-            }
-            j += 1;
-        }
-        out.push(ResidualFeature {
-            kind: if sign > 0.0 { "extra" } else { "missing" },
-            frequency_ratio: r[best],
-            frequency_hz: r[best] * f1,
-            size_db: resid[best],
-            level_db: measured_rel[best],
-            width_ratio: (j - start) as f64 / spectrum::GRID_PERIODS,
-        });
-    }
-    out
-}
-
-/// Mean of `m − f` over the grid points nearest `ratios` where the measurement stands `min_db`
-/// above the fitted noise floor (`None`: no such point).
-fn fingerprint_gap(
-    m: &[f64],
-    f: &[f64],
-    noise_db: f64,
-    ratios: &[f64],
-    min_db: f64,
-) -> Option<f64> {
-    let v: Vec<f64> = ratios
-        .iter()
-        .filter_map(|&x| grid_index(x))
-        .filter(|&j| m[j] > noise_db + min_db)
-        .map(|j| m[j] - f[j])
-        .collect();
-    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+    v
 }
 
 struct Fitted {
@@ -451,14 +364,17 @@ struct Fitted {
     k: usize,
 }
 
-fn effect_shaft(e: f64, gb: &Gearbox) -> Effect {
+fn effect_shaft(e: f64, shaft: &MeshGear) -> Effect {
     let mut p = BTreeMap::new();
     p.insert("sideband_amplitude_b".into(), e);
-    p.insert("shaft_ratio".into(), shaft_ratio(gb));
+    p.insert("shaft_ratio".into(), shaft.shaft_ratio);
+    let mut l = BTreeMap::new();
+    l.insert("shaft".into(), shaft.shaft.clone());
     Effect {
         name: SHAFT_MODULATION.into(),
         kind: "element",
         parameters: p,
+        labels: l,
     }
 }
 
@@ -467,10 +383,16 @@ fn effect_resonance(res: &Resonance, f1: f64) -> Effect {
     p.insert("frequency_ratio".into(), res.rho);
     p.insert("frequency_hz".into(), res.rho * f1);
     p.insert("damping_ratio".into(), res.zeta);
+    if let Some(g) = res.peak_gain {
+        p.insert("peak_gain".into(), g);
+    }
+    let mut l = BTreeMap::new();
+    l.insert("form".into(), res.form().to_string());
     Effect {
         name: PATH_RESONANCE.into(),
         kind: "sensor-stage",
         parameters: p,
+        labels: l,
     }
 }
 
@@ -481,11 +403,52 @@ fn effect_planetary(pl: f64) -> Effect {
         name: PLANETARY_WEAR.into(),
         kind: "element",
         parameters: p,
+        labels: BTreeMap::new(),
     }
 }
 
-fn cands_res(s: &SensorFit) -> Option<Resonance> {
-    s.resonance
+fn effect_tooth(depth: f64, gear: &MeshGear) -> Effect {
+    let mut p = BTreeMap::new();
+    p.insert("stiffness_loss".into(), depth);
+    p.insert("shaft_ratio".into(), gear.shaft_ratio);
+    p.insert("teeth".into(), gear.teeth as f64);
+    let mut l = BTreeMap::new();
+    l.insert("gear".into(), format!("stage-1 {}", gear.member));
+    l.insert("shaft".into(), gear.shaft.clone());
+    Effect {
+        name: TOOTH_DAMAGE.into(),
+        kind: "element",
+        parameters: p,
+        labels: l,
+    }
+}
+
+/// The effects of an element parameter set (given the gears and shafts they name).
+fn element_effects(
+    p: &ElementParams,
+    baseline: f64,
+    gears: &[MeshGear],
+    input: &MeshGear,
+) -> Vec<Effect> {
+    let mut v = Vec::new();
+    if p.eccentricity > 0.0 {
+        let sh = gears
+            .iter()
+            .find(|g| p.ecc_shaft > 0.0 && (g.shaft_ratio - p.ecc_shaft).abs() < 1e-12)
+            .unwrap_or(input);
+        v.push(effect_shaft(p.eccentricity, sh));
+    }
+    if p.planetary > baseline + 1e-12 {
+        v.push(effect_planetary(p.planetary));
+    }
+    if p.tooth_depth > 0.0
+        && let Some(g) = gears
+            .iter()
+            .find(|g| (g.shaft_ratio - p.tooth_shaft).abs() < 1e-12)
+    {
+        v.push(effect_tooth(p.tooth_depth, g));
+    }
+    v
 }
 
 /// Close the loop on one record; see the [module docs](self).
@@ -503,13 +466,6 @@ pub fn calibrate(
     let r = grid();
     let m = log_spectrum(&record.samples, fs, f1)?;
     let j_n = m.len() as f64;
-    let bic = |rss: f64, k: usize| j_n * (rss / j_n).max(1e-300).ln() + k as f64 * j_n.ln();
-
-    // Table features of the record (for the re-estimate after a path stage).
-    let lines = &table.features.lines;
-    let meas = measure_lines(&record.samples, fs, f1, &line_ratios(lines))?;
-    let matcher = Matcher::new(table, &opts.diagnose)?;
-    let feats = meas.features(lines);
 
     let baseline_planetary = gb.planetary_baseline().unwrap_or(0.0);
     let wear_before = WearEstimate {
@@ -517,68 +473,75 @@ pub fn calibrate(
         ea_lower: d.wear_degree.lower,
         ea_upper: d.wear_degree.upper,
         planetary: baseline_planetary,
+        method: "table-posterior",
     };
-    let sim = Simulator {
-        gb,
-        omega1,
-        periods: opts.sim_periods,
-        seed: opts.sim_seed,
-        cache: Mutex::new(HashMap::new()),
-    };
-    let p0 = ElementParams {
-        ea: wear_before.ea,
-        planetary: baseline_planetary,
-        eccentricity: 0.0,
-    };
+    let sim = Simulator::new(gb, omega1, opts);
+    let p0 = ElementParams::plain(wear_before.ea, baseline_planetary);
     // Before: the plain model at the table's estimate (the diagnosis as it stands).
     let s0 = sim.spectrum(&p0)?;
-    let (sens0, _) = fit_sensor(&m, &s0, &r, None);
+    let (sens0, rss0) = fit_sensor(&m, &s0, &r, None);
     let f0 = sensor_model(&s0, &r, &sens0);
 
-    // Candidate "none": the plain model, ea refined by simulation.
-    let mut cands: Vec<Fitted> = Vec::new();
-    let (pn, sn, rn) = sim.best_over_ea(&m, &r, p0, None)?;
-    cands.push(Fitted {
+    // Candidate "none": the plain model, ea profiled over the whole grid.
+    let prof_none = sim.profile_adaptive(&m, &r, p0, None, None)?;
+    let (pn, sn, rn) = best_point(&prof_none);
+    let resid_none: Vec<f64> = {
+        let f = sensor_model(&sim.spectrum(&pn)?, &r, &sn);
+        m.iter().zip(&f).map(|(a, b)| a - b).collect()
+    };
+    let j_eff = effective_points(&resid_none);
+    let mut cands: Vec<Fitted> = vec![Fitted {
         name: "none".into(),
         effects: vec![],
         params: pn,
         sensor: sn,
         rss: rn,
         k: 3,
-    });
+    }];
 
-    // Path resonance (sensor stage): fitted at the table's ea, line features de-coloured,
-    // table estimate again, then ea refined with the resonance in the model.
-    let (sens_r0, _) = fit_resonance(&m, &s0, &r);
-    let res0 = sens_r0.resonance.expect("fitted resonance");
-    let (ea_dc, post_dc) = {
-        let h1 = res0.gain_db(1.0);
-        let mut y = feats.clone();
-        for (k, l) in lines.iter().filter(|l| l.name != "f1").enumerate() {
-            y[k] -= (res0.gain_db(l.ratio) - h1) * LN_10 / 20.0;
+    // Path resonance (sensor stage): searched over the band at the plain model's best ea,
+    // ea profiled over the whole grid with the resonance re-fitted (the plain model's
+    // simulations, cached), searched again at the new ea, profiled again.
+    let mut res_start = search_resonance(&m, &sim.spectrum(&pn)?, &r)
+        .0
+        .resonance
+        .expect("fitted resonance");
+    let mut prof_res = sim.profile_adaptive(&m, &r, p0, Some(res_start), None)?;
+    let (pr1, _, _) = best_point(&prof_res);
+    if (pr1.ea - pn.ea).abs() > 1e-9 {
+        let (again, _) = search_resonance(&m, &sim.spectrum(&pr1)?, &r);
+        res_start = again.resonance.expect("fitted resonance");
+        let prof2 = sim.profile_adaptive(&m, &r, p0, Some(res_start), None)?;
+        if best_point(&prof2).2 < best_point(&prof_res).2 {
+            prof_res = prof2;
         }
-        let post = posterior(&matcher, &matcher.clip(&y), omega1, &opts.diagnose);
-        (post.quantile(0.5), post)
-    };
-    let (pr, sr_, rr) = sim.best_over_ea(&m, &r, ElementParams { ea: ea_dc, ..p0 }, Some(res0))?;
+    }
+    let (pr, sr_, rr) = best_point(&prof_res);
+    let res_best = sr_.resonance.expect("fitted");
     cands.push(Fitted {
         name: PATH_RESONANCE.into(),
-        effects: vec![effect_resonance(&sr_.resonance.expect("fitted"), f1)],
+        effects: vec![effect_resonance(&res_best, f1)],
         params: pr,
         sensor: sr_,
         rss: rr,
-        k: 5,
+        k: if res_best.peak_gain.is_some() { 6 } else { 5 },
     });
 
     // Element effects: amplitude from the gap at the fingerprint lines (one probe simulation),
-    // ea refined, amplitude re-fitted at the refined ea.
-    let shaft = shaft_ratio(gb);
-    let sb: Vec<f64> = [1.0, 2.0]
-        .iter()
-        .flat_map(|c| [c - shaft, c + shaft])
-        .collect();
-    // The planetary-wear fingerprint: the first planetary stage's mesh line family (none
-    // without a planetary stage that the wear does not act on: the effect is then not tried).
+    // ea profiled locally, amplitude re-fitted at the refined ea.
+    let gears = reference_gears(gb);
+    let input = MeshGear {
+        member: "pinion",
+        shaft: gb.description.input_shaft.clone(),
+        teeth: (1.0 / shaft_ratio(gb)).round() as u32,
+        shaft_ratio: shaft_ratio(gb),
+    };
+    let mut shafts: Vec<MeshGear> = vec![input.clone()];
+    for g in &gears {
+        if (g.shaft_ratio - input.shaft_ratio).abs() > 1e-9 {
+            shafts.push(g.clone());
+        }
+    }
     let f3 = gb.planetary_ratio();
     let fam: Vec<f64> = f3
         .map(|f3| vec![f3, 2.0 * f3, 1.0 - f3, 1.0 + f3])
@@ -597,114 +560,276 @@ pub fn calibrate(
             None => lo,
         })
     };
-    let element_fit = |base: ElementParams, which: &str| -> Result<ElementParams> {
-        let amp = |b: ElementParams| -> Result<ElementParams> {
-            Ok(if which == SHAFT_MODULATION {
-                let e = fit_amp(
-                    &|e| ElementParams {
-                        eccentricity: e,
-                        ..b
-                    },
-                    0.05,
-                    &sb,
-                    1e-3,
-                    2.0,
-                )?;
-                ElementParams {
-                    eccentricity: e,
-                    ..b
-                }
-            } else {
-                let p = fit_amp(
-                    &|p| ElementParams { planetary: p, ..b },
-                    1.0,
-                    &fam,
-                    baseline_planetary,
-                    5.0,
-                )?;
-                ElementParams { planetary: p, ..b }
-            })
-        };
-        let first = amp(base)?;
-        let (refined, _, _) = sim.best_over_ea(&m, &r, first, None)?;
-        amp(refined)
+    // An element effect: `set(base, amplitude)` puts the amplitude in.
+    let element_fit = |base: ElementParams,
+                       set: &(dyn Fn(ElementParams, f64) -> ElementParams + Sync),
+                       probe: f64,
+                       ratios: &[f64],
+                       lo: f64,
+                       hi: f64|
+     -> Result<ElementParams> {
+        let a1 = fit_amp(&|a| set(base, a), probe, ratios, lo, hi)?;
+        let first = set(base, a1);
+        let prof = sim.profile(&m, &r, first, &ea_window(first.ea), None, None)?;
+        let (refined, _, _) = best_point(&prof);
+        let a2 = fit_amp(&|a| set(refined, a), a1, ratios, lo, hi)?;
+        Ok(set(refined, a2))
     };
-    let pe = element_fit(pn, SHAFT_MODULATION)?;
-    let pp = if f3.is_some() {
-        Some(element_fit(pn, PLANETARY_WEAR)?)
-    } else {
-        None
-    };
-    let mut push =
-        |name: String, p: ElementParams, res: Option<Resonance>, k: usize| -> Result<()> {
-            let s = sim.spectrum(&p)?;
-            let (sens, rss) = match res {
-                Some(res) => fit_sensor(&m, &s, &r, Some(res)),
-                None => fit_sensor(&m, &s, &r, None),
-            };
-            let mut effects = Vec::new();
-            if p.eccentricity > 0.0 {
-                effects.push(effect_shaft(p.eccentricity, gb));
-            }
-            if name.contains(PLANETARY_WEAR) {
-                effects.push(effect_planetary(p.planetary));
-            }
-            if let Some(res) = sens.resonance {
-                effects.push(effect_resonance(&res, f1));
-            }
-            cands.push(Fitted {
-                name,
-                effects,
-                params: p,
-                sensor: sens,
-                rss,
-                k,
-            });
-            Ok(())
+    let mut singles: Vec<(String, ElementParams)> = Vec::new();
+    for sh in &shafts {
+        let s = sh.shaft_ratio;
+        let sb: Vec<f64> = [1.0, 2.0].iter().flat_map(|c| [c - s, c + s]).collect();
+        let set = move |b: ElementParams, e: f64| ElementParams {
+            eccentricity: e,
+            ecc_shaft: s,
+            ..b
         };
-    let res_r = cands_res(&sr_);
-    push(SHAFT_MODULATION.into(), pe, None, 4)?;
-    if let Some(pp) = pp {
-        push(PLANETARY_WEAR.into(), pp, None, 4)?;
+        let p = element_fit(pn, &set, 0.05, &sb, 1e-3, 2.0)?;
+        singles.push((SHAFT_MODULATION.into(), p));
     }
-    push(format!("{SHAFT_MODULATION}+{PATH_RESONANCE}"), pe, res_r, 6)?;
-    if let Some(pp) = pp {
-        push(format!("{PLANETARY_WEAR}+{PATH_RESONANCE}"), pp, res_r, 6)?;
-        let pep = ElementParams {
-            planetary: pp.planetary,
-            ..pe
+    if f3.is_some() {
+        let set = |b: ElementParams, p: f64| ElementParams { planetary: p, ..b };
+        let p = element_fit(pn, &set, 1.0, &fam, baseline_planetary, 5.0)?;
+        singles.push((PLANETARY_WEAR.into(), p));
+    }
+    for g in &gears {
+        let s = g.shaft_ratio;
+        // The comb k f1 ± n s (k = 1, 2; n = 2 … 5): n = 1 is shared with shaft modulation.
+        let comb: Vec<f64> = [1.0, 2.0]
+            .iter()
+            .flat_map(|c| (2..=5).flat_map(move |n| [c - n as f64 * s, c + n as f64 * s]))
+            .collect();
+        let set = move |b: ElementParams, dep: f64| ElementParams {
+            tooth_depth: dep,
+            tooth_shaft: s,
+            ..b
         };
-        push(format!("{SHAFT_MODULATION}+{PLANETARY_WEAR}"), pep, None, 5)?;
+        let p = element_fit(pn, &set, 0.3, &comb, 0.02, 0.9)?;
+        singles.push((TOOTH_DAMAGE.into(), p));
+    }
+    let make = |name: String, p: ElementParams, res: Option<Resonance>| -> Result<Fitted> {
+        let s = sim.spectrum(&p)?;
+        let (sens, rss) = fit_sensor(&m, &s, &r, res);
+        let mut effects = element_effects(&p, baseline_planetary, &gears, &input);
+        if let Some(res) = sens.resonance {
+            effects.push(effect_resonance(&res, f1));
+        }
+        // gain, noise, ea + one amplitude per element effect + ρ, ζ (and g) of a resonance.
+        let k = 3 + effects
+            .iter()
+            .map(|e| match e.name.as_str() {
+                PATH_RESONANCE => 2 + e.parameters.contains_key("peak_gain") as usize,
+                _ => 1,
+            })
+            .sum::<usize>();
+        Ok(Fitted {
+            name,
+            effects,
+            params: p,
+            sensor: sens,
+            rss,
+            k,
+        })
+    };
+    for (name, p) in &singles {
+        cands.push(make(name.clone(), *p, None)?);
+    }
+    // Pairs: the best variant of each element effect with the resonance, and with each other.
+    let n_single = cands.len();
+    let mut best_variant: Vec<(String, ElementParams)> = Vec::new();
+    for (k, (name, p)) in singles.iter().enumerate() {
+        let rss = cands[n_single - singles.len() + k].rss;
+        match best_variant.iter().position(|(n, _)| n == name) {
+            Some(i) => {
+                let j = singles
+                    .iter()
+                    .position(|(n, q)| n == name && *q == best_variant[i].1);
+                let old = j.map_or(f64::INFINITY, |j| cands[n_single - singles.len() + j].rss);
+                if rss < old {
+                    best_variant[i].1 = *p;
+                }
+            }
+            None => best_variant.push((name.clone(), *p)),
+        }
+    }
+    for (name, p) in &best_variant {
+        cands.push(make(
+            format!("{name}+{PATH_RESONANCE}"),
+            *p,
+            Some(res_best),
+        )?);
+    }
+    for (i, (na, pa)) in best_variant.iter().enumerate() {
+        for (nb, pb) in best_variant.iter().skip(i + 1) {
+            let p = ElementParams {
+                eccentricity: pa.eccentricity.max(pb.eccentricity),
+                ecc_shaft: if pa.eccentricity > 0.0 {
+                    pa.ecc_shaft
+                } else {
+                    pb.ecc_shaft
+                },
+                planetary: pa.planetary.max(pb.planetary),
+                tooth_depth: pa.tooth_depth.max(pb.tooth_depth),
+                tooth_shaft: if pa.tooth_depth > 0.0 {
+                    pa.tooth_shaft
+                } else {
+                    pb.tooth_shaft
+                },
+                ea: pa.ea,
+            };
+            cands.push(make(format!("{na}+{nb}"), p, None)?);
+        }
     }
 
-    // Selection.
-    let bic0 = bic(cands[0].rss, 3);
+    // Attribution check: an effect is claimed only where its fingerprint is. The share of a
+    // candidate's RSS improvement over the plain model at the same ea (so that a wear
+    // correction, which moves every line, does not count) that falls on its fingerprint points
+    // (the plain model's own lines for a path stage — a resonance colours what the gearbox
+    // makes; the sidebands ± s of its shaft around every line of the plain model (and
+    // 1, 2 f1) for shaft modulation; the comb
+    // k f1 ± n s (n = 1 … 5) for tooth damage; a f1 ± c f3 (a = 0, 1, 2; c = 1, 2) for
+    // planetary wear; ±1 grid point) must reach [`SUPPORT_SHARE`]; otherwise the candidate is
+    // not eligible.
+    let f_none = sensor_model(&sim.spectrum(&cands[0].params)?, &r, &cands[0].sensor);
+    let near = |ratios: &[f64], mask: &mut [bool]| {
+        for &x in ratios {
+            if let Some(j) = grid_index(x) {
+                for k in j.saturating_sub(1)..=(j + 1).min(mask.len() - 1) {
+                    mask[k] = true;
+                }
+            }
+        }
+    };
+    let mut line_mask: Vec<bool> = vec![false; r.len()];
+    for (j, v) in f_none.iter().enumerate() {
+        if *v > cands[0].sensor.noise_db + 3.0 {
+            for k in j.saturating_sub(1)..=(j + 1).min(r.len() - 1) {
+                line_mask[k] = true;
+            }
+        }
+    }
+    // The plain model's lines: local maxima 6 dB above its noise floor.
+    let line_peaks: Vec<f64> = (1..r.len() - 1)
+        .filter(|&j| {
+            f_none[j] > cands[0].sensor.noise_db + 6.0
+                && f_none[j] >= f_none[j - 1]
+                && f_none[j] >= f_none[j + 1]
+        })
+        .map(|j| r[j])
+        .collect();
+    let fam_wide: Vec<f64> = f3
+        .map(|f3| {
+            [0.0, 1.0, 2.0]
+                .iter()
+                .flat_map(|a| [-2.0, -1.0, 1.0, 2.0].map(|c| (a + c * f3).abs()))
+                .collect()
+        })
+        .unwrap_or_default();
+    let mut support: Vec<f64> = vec![1.0; cands.len()];
+    for (ci, c) in cands.iter().enumerate().skip(1) {
+        let mut mask = vec![false; r.len()];
+        for e in &c.effects {
+            let s = e.parameters.get("shaft_ratio").copied().unwrap_or(0.0);
+            match e.name.as_str() {
+                PATH_RESONANCE => {
+                    for (mk, l) in mask.iter_mut().zip(&line_mask) {
+                        *mk |= *l;
+                    }
+                }
+                SHAFT_MODULATION => {
+                    let sb: Vec<f64> = line_peaks
+                        .iter()
+                        .flat_map(|l| [l - s, l + s])
+                        .chain([1.0 - s, 1.0 + s, 2.0 - s, 2.0 + s])
+                        .collect();
+                    near(&sb, &mut mask)
+                }
+                TOOTH_DAMAGE => {
+                    let comb: Vec<f64> = [1.0, 2.0]
+                        .iter()
+                        .flat_map(|c| {
+                            (1..=5).flat_map(move |n| [c - n as f64 * s, c + n as f64 * s])
+                        })
+                        .collect();
+                    near(&comb, &mut mask);
+                }
+                _ => near(&fam_wide, &mut mask),
+            }
+        }
+        let fc = sensor_model(&sim.spectrum(&c.params)?, &r, &c.sensor);
+        let plain = sim.spectrum(&ElementParams::plain(c.params.ea, baseline_planetary))?;
+        let (sp, _) = fit_sensor(&m, &plain, &r, None);
+        let f_none = sensor_model(&plain, &r, &sp);
+        let (mut tot, mut inside) = (0.0, 0.0);
+        for j in 0..r.len() {
+            let d = (m[j] - f_none[j]).powi(2) - (m[j] - fc[j]).powi(2);
+            tot += d;
+            if mask[j] {
+                inside += d;
+            }
+        }
+        support[ci] = if tot > 0.0 { inside / tot } else { 0.0 };
+        // A path stage colours what the gearbox makes: it must move at least
+        // [`MIN_COLOURED_LINES`] of the plain model's lines by more than 3 dB relative to f1.
+        // A narrow mode that lifts one weak line next to a tone is a tone, not a path.
+        if let Some(h) = c.sensor.resonance {
+            let h1 = h.gain_db(1.0);
+            let coloured = line_peaks
+                .iter()
+                .filter(|&&x| (h.gain_db(x) - h1).abs() > 3.0)
+                .count();
+            if coloured < MIN_COLOURED_LINES {
+                support[ci] = support[ci].min(0.0);
+            }
+        }
+    }
+
+    // Selection: BIC over the J grid points (J_eff, the larger of the plain model's and the best
+    // candidate's effective count, is used for the wear interval only).
+    let best_c = (0..cands.len())
+        .min_by(|&a, &b| cands[a].rss.total_cmp(&cands[b].rss))
+        .expect("candidates");
+    let j_eff = {
+        let c = &cands[best_c];
+        let fc = sensor_model(&sim.spectrum(&c.params)?, &r, &c.sensor);
+        let rc: Vec<f64> = m.iter().zip(&fc).map(|(a, b)| a - b).collect();
+        j_eff.max(effective_points(&rc))
+    };
+    let bic = |rss: f64, k: usize| j_n * (rss / j_n).max(1e-300).ln() + k as f64 * j_n.ln();
     let scores: Vec<f64> = cands.iter().map(|c| bic(c.rss, c.k)).collect();
+    let bic0 = scores[0];
+    let eligible = |i: usize| support[i] >= SUPPORT_SHARE;
     let best_of = |pred: &dyn Fn(&Fitted) -> bool| {
         (0..cands.len())
-            .filter(|&i| pred(&cands[i]))
+            .filter(|&i| pred(&cands[i]) && eligible(i))
             .min_by(|&a, &b| scores[a].total_cmp(&scores[b]))
     };
-    let single = best_of(&|c| c.effects.len() == 1).expect("single candidates");
-    let pair = best_of(&|c| c.effects.len() == 2).expect("pair candidates");
+    let significant = |name: &str| {
+        cands.iter().zip(&scores).enumerate().any(|(i, (c, b))| {
+            c.effects.len() == 1
+                && c.effects[0].name == name
+                && *b < bic0 - opts.bic_margin
+                && eligible(i)
+        })
+    };
     let mut chosen = 0;
-    if scores[single] < bic0 - opts.bic_margin {
+    if let Some(single) = best_of(&|c| c.effects.len() == 1)
+        && scores[single] < bic0 - opts.bic_margin
+    {
         chosen = single;
-        // A pair needs every member significant on its own, and to beat the best single.
-        let members_ok = cands[pair].effects.iter().all(|e| {
-            cands
-                .iter()
-                .zip(&scores)
-                .any(|(c, b)| c.name == e.name && *b < bic0 - opts.bic_margin)
-        });
-        if members_ok && scores[pair] < scores[single] - opts.bic_margin {
-            chosen = pair;
+        if let Some(pair) = best_of(&|c| c.effects.len() == 2) {
+            // A pair needs every member significant on its own, and to beat the best single.
+            let members_ok = cands[pair].effects.iter().all(|e| significant(&e.name));
+            if members_ok && scores[pair] < scores[single] - opts.bic_margin {
+                chosen = pair;
+            }
         }
     }
     let candidates: Vec<Candidate> = cands
         .iter()
         .zip(&scores)
-        .map(|(c, b)| Candidate {
+        .enumerate()
+        .map(|(i, (c, b))| Candidate {
             name: c.name.clone(),
             effects: c.effects.clone(),
             parameters: c.k,
@@ -712,29 +837,40 @@ pub fn calibrate(
             error_db: (c.rss / j_n).sqrt(),
             bic: *b,
             delta_bic: b - bic0,
+            fingerprint_share: support[i],
         })
         .collect();
 
-    // The chosen model, refitted (its ea already refined by simulation).
-    let ch = &cands[chosen];
-    let wear_after = if ch.sensor.resonance.is_some() && ch.params.ea == ea_dc {
-        WearEstimate {
-            ea: ch.params.ea,
-            ea_lower: post_dc.quantile(0.5 - opts.diagnose.credible_level / 2.0),
-            ea_upper: post_dc.quantile(0.5 + opts.diagnose.credible_level / 2.0),
-            planetary: ch.params.planetary,
-        }
+    // The refit: the chosen model's ea profiled over the whole grid (continuous minimum and a
+    // profile-likelihood interval). No effect claimed: the model is unchanged.
+    let level = opts.diagnose.credible_level;
+    let (wear_after, sensor_after, f_after, effects) = if chosen == 0 {
+        (wear_before, sens0, f0.clone(), Vec::new())
     } else {
-        WearEstimate {
-            ea: ch.params.ea,
-            ea_lower: ch.params.ea,
-            ea_upper: ch.params.ea,
-            planetary: ch.params.planetary,
+        let ch = &cands[chosen];
+        let prof = sim.profile_adaptive(&m, &r, ch.params, ch.sensor.resonance, None)?;
+        let pts: Vec<(f64, f64)> = prof.iter().map(|p| (p.0.ea, p.2)).collect();
+        let (ea, lo, hi) = profile_interval(&pts, j_eff, level);
+        let (pb, sb, _) = best_point(&prof);
+        let fa = sensor_model(&sim.spectrum(&pb)?, &r, &sb);
+        let mut effects = element_effects(&pb, baseline_planetary, &gears, &input);
+        if let Some(res) = sb.resonance {
+            effects.push(effect_resonance(&res, f1));
         }
+        (
+            WearEstimate {
+                ea,
+                ea_lower: lo,
+                ea_upper: hi,
+                planetary: pb.planetary,
+                method: "profile-likelihood",
+            },
+            sb,
+            fa,
+            effects,
+        )
     };
-    let sensor_after = ch.sensor;
-    let f_after = sensor_model(&sim.spectrum(&ch.params)?, &r, &sensor_after);
-    let error_before = rms_distance(&m, &f0);
+    let error_before = (rss0 / j_n).sqrt();
     let error_after = rms_distance(&m, &f_after);
 
     let i1 = grid_index(1.0).unwrap_or(0);
@@ -745,7 +881,8 @@ pub fn calibrate(
     let trend = running_median(&res_after, (0.1 * spectrum::GRID_PERIODS) as usize);
     let trend_rms_db = rms_distance(&trend, &vec![0.0; trend.len()]);
     let m_rel = rel(&m);
-    let unexplained = residual_features(&res_after, &m_rel, &r, f1, opts.unexplained_db);
+    let mut unexplained = residual_features(&res_after, &m_rel, &r, f1, opts.unexplained_db);
+    annotate(&mut unexplained, gb, f1);
     let residual_features_before =
         residual_features(&res_before, &m_rel, &r, f1, opts.unexplained_db);
     if !(error_before.is_finite() && error_after.is_finite()) {
@@ -756,9 +893,10 @@ pub fn calibrate(
     Ok(CalibrationReport {
         f1_hz: f1,
         omega1,
-        effects: ch.effects.clone(),
+        effects,
         unexplained,
         residual_features_before,
+        effective_points: j_eff,
         error_before,
         error_after,
         wear_before,
@@ -784,12 +922,19 @@ pub fn calibrate(
 /// The wear re-estimated with a machine's calibrated effects held fixed ([`refit_held`]).
 #[derive(Debug, Clone, Copy, Serialize)]
 pub struct HeldRefit {
-    /// Fixed-axis wear `ea` of the best simulation (grid 0.1, 0.15, …, 1.0 plus the start).
+    /// Fixed-axis wear `ea`: the minimum of the profile over 0.1, 0.2, …, 1.0, the start and
+    /// ±0.05 around the best (parabola through the best three points; continuous).
     pub ea: f64,
+    /// Profile-likelihood interval of `ea` at the diagnosis's credible level.
+    pub ea_lower: f64,
+    pub ea_upper: f64,
     /// Planetary error and shaft-modulation amplitude the model held (units of b).
     pub planetary_error_b: f64,
     pub eccentricity_b: f64,
-    /// RMS log-spectral distance (dB) of the model with the held effects at `ea`.
+    /// Tooth-damage stiffness loss the model held (0: none).
+    pub tooth_stiffness_loss: f64,
+    /// RMS log-spectral distance (dB) of the model with the held effects at the best simulated
+    /// ea.
     pub error_db: f64,
     /// The same for the plain model at the start value (the uncalibrated diagnosis).
     pub error_plain_db: f64,
@@ -799,8 +944,9 @@ pub struct HeldRefit {
 
 /// Re-estimate the wear of `record` with `held` in the model: element effects in the
 /// assembly, a path resonance as a fixed sensor stage (its Hz frequency mapped to `f1`).
-/// `ea` is refined by simulation over the same grid as [`calibrate`], gain and noise floor by
-/// Levenberg–Marquardt; nothing about the effects is re-fitted.
+/// `ea` is profiled like [`calibrate`]'s refit (gain and noise floor by
+/// Levenberg–Marquardt at each point; nothing about the effects re-fitted), with the same
+/// continuous minimum and profile-likelihood interval.
 pub fn refit_held(
     record: &Record,
     table: &SignatureTable,
@@ -816,60 +962,43 @@ pub fn refit_held(
     let r = grid();
     let m = log_spectrum(&record.samples, record.sample_rate, f1)?;
     let j_n = m.len() as f64;
-    let sim = Simulator {
-        gb,
-        omega1,
-        periods: opts.sim_periods,
-        seed: opts.sim_seed,
-        cache: Mutex::new(HashMap::new()),
-    };
+    let sim = Simulator::new(gb, omega1, opts);
     let baseline = gb.planetary_baseline().unwrap_or(0.0);
-    let p0 = ElementParams {
-        ea: ea_start,
-        planetary: baseline,
-        eccentricity: 0.0,
-    };
+    let p0 = ElementParams::plain(ea_start, baseline);
     let s0 = sim.spectrum(&p0)?;
-    let (sens0, _) = fit_sensor(&m, &s0, &r, None);
-    let error_plain_db = rms_distance(&m, &sensor_model(&s0, &r, &sens0));
+    let (sens0, rss0) = fit_sensor(&m, &s0, &r, None);
+    let error_plain_db = (rss0 / j_n).sqrt();
+    let resid0: Vec<f64> = {
+        let f = sensor_model(&s0, &r, &sens0);
+        m.iter().zip(&f).map(|(a, b)| a - b).collect()
+    };
+    let j_eff = effective_points(&resid0);
     let res = held.resonance_at(f1);
     let base = ElementParams {
-        ea: ea_start,
         planetary: held.planetary_error_b.unwrap_or(baseline),
         eccentricity: held.eccentricity_b,
+        ecc_shaft: held.eccentricity_shaft_ratio.unwrap_or(0.0),
+        tooth_depth: held.tooth.map_or(0.0, |t| t.0),
+        tooth_shaft: held.tooth.map_or(0.0, |t| t.1),
+        ..p0
     };
-    let mut eas: Vec<f64> = (0..EA_GRID_N).map(|k| 0.1 + 0.05 * k as f64).collect();
-    eas.push(ea_start);
-    let fits: Vec<Result<(f64, f64)>> = eas
-        .par_iter()
-        .map(|&ea| {
-            let s = sim.spectrum(&ElementParams { ea, ..base })?;
-            let hs: Vec<f64> = match res {
-                Some(h) => s.iter().zip(&r).map(|(a, b)| a + h.gain_db(*b)).collect(),
-                None => s,
-            };
-            let (_, rss) = fit_sensor(&m, &hs, &r, None);
-            Ok((ea, rss))
-        })
-        .collect();
-    let mut best: Option<(f64, f64)> = None;
-    for f in fits {
-        let f = f?;
-        if best.is_none_or(|b| f.1 < b.1) {
-            best = Some(f);
-        }
-    }
-    let (ea, rss) = best.expect("non-empty ea grid");
+    let prof = sim.profile_adaptive(&m, &r, base, None, res)?;
+    let pts: Vec<(f64, f64)> = prof.iter().map(|p| (p.0.ea, p.2)).collect();
+    let (ea, ea_lower, ea_upper) = profile_interval(&pts, j_eff, opts.diagnose.credible_level);
+    let (_, _, rss) = best_point(&prof);
     let error_db = (rss / j_n).sqrt();
-    if !(error_db.is_finite() && error_plain_db.is_finite()) {
+    if !(error_db.is_finite() && error_plain_db.is_finite() && ea.is_finite()) {
         return Err(Error::Signal(
             "the refit with the calibrated effects produced a non-finite error".into(),
         ));
     }
     Ok(HeldRefit {
         ea,
+        ea_lower,
+        ea_upper,
         planetary_error_b: base.planetary,
         eccentricity_b: base.eccentricity,
+        tooth_stiffness_loss: base.tooth_depth,
         error_db,
         error_plain_db,
         f1_hz: f1,

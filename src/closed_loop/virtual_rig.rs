@@ -9,10 +9,17 @@
 //!    (cubic interpolation);
 //! 3. path resonance: a digital biquad (bilinear transform, pre-warped at the resonance) of
 //!    `H(s) = ω_r² / (s² + 2ζ ω_r s + ω_r²)`;
+//!    A peaking path mode `H(s) = 1 + g · 2ζω_r s / (s² + 2ζω_r s + ω_r²)` the same way;
 //! 4. an unrelated tone (not in the library) `A sin(2π r_t f1 t)` with `A` set `level_db` re the
-//!    f1 line amplitude of the signal so far;
-//! 5. random overall gain, then white Gaussian noise at `snr_db` (noise power = signal AC
-//!    power × 10^(−SNR/10)).
+//!    f1 line amplitude of the signal so far, with harmonics k = 2, 3, … each 6 dB weaker;
+//!    mains hum at 50 or 60 Hz with odd harmonics 3, 5, 7 (each 4 dB weaker);
+//! 5. white Gaussian noise at `snr_db` (noise power = signal AC power × 10^(−SNR/10)), then
+//!    noise bursts (not in the library: 10 ms of white noise at a level re the signal RMS) and
+//!    the overall gain, drifting linearly by ± `gain_drift` over the record when set.
+//!
+//! Element effects: wear, planetary error, shaft modulation (on the input shaft or the shaft
+//! of the given rate), a damaged tooth ([`crate::model::ToothDamage`] through
+//! [`super::effects::build_model`]).
 
 use std::f64::consts::{PI, TAU};
 
@@ -40,6 +47,20 @@ pub struct RigEffects {
     pub tone: Option<(f64, f64)>,
     /// Speed wander `(relative depth δ, rate over f1)`.
     pub speed_wander: Option<(f64, f64)>,
+    /// Rate over f1 of the shaft that modulates (`None`: the input shaft).
+    pub eccentricity_shaft: Option<f64>,
+    /// A peaking path mode `(ρ = f_r / f1, ζ, peak gain g)`.
+    pub path_peak: Option<(f64, f64, f64)>,
+    /// A damaged tooth `(its shaft's rate over f1, stiffness loss)`.
+    pub tooth: Option<(f64, f64)>,
+    /// Number of tones of the harmonic series of `tone` (0 or 1: the tone alone).
+    pub tone_harmonics: u32,
+    /// Mains hum `(50 or 60 Hz, level of the fundamental dB re the f1 line)`.
+    pub mains: Option<(f64, f64)>,
+    /// Noise bursts `(count, RMS level re the signal RMS, dB)`.
+    pub bursts: Option<(u32, f64)>,
+    /// Relative gain change from the start to the end of the record.
+    pub gain_drift: Option<f64>,
 }
 
 /// A virtual measurement.
@@ -75,6 +96,9 @@ pub fn generate(gb: &Gearbox, spec: &RigSpec) -> Result<Record> {
             ea: spec.ea,
             planetary: e.planetary.or(gb.planetary_baseline()).unwrap_or(0.0),
             eccentricity: e.eccentricity.unwrap_or(0.0),
+            ecc_shaft: e.eccentricity_shaft.unwrap_or(0.0),
+            tooth_depth: e.tooth.map_or(0.0, |t| t.1),
+            tooth_shaft: e.tooth.map_or(0.0, |t| t.0),
         },
     )?;
     let fs = spec.sample_rate;
@@ -118,12 +142,38 @@ pub fn generate(gb: &Gearbox, spec: &RigSpec) -> Result<Record> {
     if let Some((rho, zeta)) = e.resonance {
         biquad_resonance(&mut x, fs, rho * f1, zeta);
     }
-    if let Some((ratio, level_db)) = e.tone {
-        let a1 = line_amplitude(&x, fs, f1)?;
+    if let Some((rho, zeta, g)) = e.path_peak {
+        biquad_peak(&mut x, fs, rho * f1, zeta, g);
+    }
+    let a1 = if e.tone.is_some() || e.mains.is_some() {
+        line_amplitude(&x, fs, f1)?
+    } else {
+        0.0
+    };
+    let add_tone = |x: &mut [f64], hz: f64, level_db: f64, ph: f64| {
+        if hz >= 0.45 * fs {
+            return;
+        }
         let a = a1 * 10f64.powf(level_db / 20.0);
-        let ph = rng.range(0.0, TAU);
         for (n, v) in x.iter_mut().enumerate() {
-            *v += a * (TAU * ratio * f1 * n as f64 / fs + ph).sin();
+            *v += a * (TAU * hz * n as f64 / fs + ph).sin();
+        }
+    };
+    if let Some((ratio, level_db)) = e.tone {
+        for k in 1..=e.tone_harmonics.max(1) {
+            let ph = rng.range(0.0, TAU);
+            add_tone(
+                &mut x,
+                k as f64 * ratio * f1,
+                level_db - 6.0 * (k - 1) as f64,
+                ph,
+            );
+        }
+    }
+    if let Some((hz, level_db)) = e.mains {
+        for (i, k) in [1.0, 3.0, 5.0, 7.0].iter().enumerate() {
+            let ph = rng.range(0.0, TAU);
+            add_tone(&mut x, k * hz, level_db - 4.0 * i as f64, ph);
         }
     }
     let n = x.len().max(1) as f64;
@@ -131,7 +181,21 @@ pub fn generate(gb: &Gearbox, spec: &RigSpec) -> Result<Record> {
     let power = x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
     let sigma = (power / 10f64.powf(spec.snr_db / 10.0)).sqrt();
     for v in x.iter_mut() {
-        *v = spec.gain * (*v + sigma * rng.normal());
+        *v += sigma * rng.normal();
+    }
+    if let Some((count, level_db)) = e.bursts {
+        let len = ((0.01 * fs) as usize).max(1).min(x.len());
+        let a = power.sqrt() * 10f64.powf(level_db / 20.0);
+        for _ in 0..count {
+            let start = rng.range(0.0, (x.len() - len) as f64) as usize;
+            for v in &mut x[start..start + len] {
+                *v += a * rng.normal();
+            }
+        }
+    }
+    let drift = e.gain_drift.unwrap_or(0.0);
+    for (i, v) in x.iter_mut().enumerate() {
+        *v *= spec.gain * (1.0 + drift * (i as f64 / n - 0.5));
     }
     Ok(Record {
         samples: x,
@@ -150,6 +214,35 @@ fn cubic(s: &[f64], pos: f64) -> f64 {
         + (-p0 + p2) * u
         + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * u * u
         + (-p0 + 3.0 * p1 - 3.0 * p2 + p3) * u * u * u)
+}
+
+/// Filter `x` in place with the bilinear transform (pre-warped at `fr`) of the peaking mode
+/// `1 + g · 2ζω_r s / (s² + 2ζω_r s + ω_r²)` (unit gain away from `fr`, `1 + g` at it).
+fn biquad_peak(x: &mut [f64], fs: f64, fr: f64, zeta: f64, g: f64) {
+    let w = TAU * fr;
+    let k = w / (PI * fr / fs).tan();
+    let (w2, k2) = (w * w, k * k);
+    let c = 2.0 * zeta * w * (1.0 + g);
+    let d = 2.0 * zeta * w;
+    // Numerator s² + c s + w², denominator s² + d s + w², s = k (z − 1)/(z + 1).
+    let a0 = k2 + d * k + w2;
+    let b = [
+        (k2 + c * k + w2) / a0,
+        (2.0 * w2 - 2.0 * k2) / a0,
+        (k2 - c * k + w2) / a0,
+    ];
+    let a1 = (2.0 * w2 - 2.0 * k2) / a0;
+    let a2 = (k2 - d * k + w2) / a0;
+    let (mut x1, mut x2, mut y1, mut y2) = (0.0, 0.0, 0.0, 0.0);
+    for v in x.iter_mut() {
+        let x0 = *v;
+        let y0 = b[0] * x0 + b[1] * x1 + b[2] * x2 - a1 * y1 - a2 * y2;
+        x2 = x1;
+        x1 = x0;
+        y2 = y1;
+        y1 = y0;
+        *v = y0;
+    }
 }
 
 /// Filter `x` in place with the bilinear transform (pre-warped at `fr`) of the unit-DC-gain

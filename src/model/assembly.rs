@@ -300,6 +300,7 @@ impl Assembly {
                 .map(|e| e.damping_in_contact_only)
                 .collect(),
             error,
+            tooth_damage: self.elements.iter().map(|e| e.tooth_damage).collect(),
             omega_h,
             length_ref: b,
             a_ref,

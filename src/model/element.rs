@@ -185,6 +185,70 @@ pub struct Element {
     /// when `backlash` is 0.
     #[serde(default)]
     pub damping_in_contact_only: bool,
+    /// A locally damaged tooth (crack, broken tooth) on one gear of this mesh: the mesh
+    /// stiffness dips once per revolution of that gear's shaft ([`ToothDamage`]). `None`: healthy.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tooth_damage: Option<ToothDamage>,
+}
+
+/// A local tooth fault on one gear of a mesh: while the damaged tooth is in mesh the mesh
+/// stiffness is reduced,
+///
+/// `k(τ) → k(τ) (1 − depth · w(u))`, `u = frac(Ω_s τ / 2π + phase / 2π)`,
+///
+/// with `Ω_s = shaft_ratio · Ω1` the rate of the damaged gear's shaft and `w` a raised-cosine
+/// (Hann) pulse of length `width` revolutions (`w(u) = ½ (1 − cos 2π u / width)` for
+/// `u < width`, else 0). With `width = contact_ratio / z` the pulse spans the damaged tooth's
+/// time in mesh. Once per shaft revolution: the fault's signature is shaft-order sidebands
+/// around every mesh harmonic and an impulsive residual after time-synchronous averaging.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ToothDamage {
+    /// Fraction of the mesh stiffness lost at the centre of the pulse, in [0, 1).
+    pub depth: f64,
+    /// The damaged gear's shaft rate over the reference mesh frequency (`1 / z` of that gear
+    /// for a gear of the reference mesh).
+    pub shaft_ratio: f64,
+    /// Pulse length in revolutions of that shaft, in (0, 0.5].
+    pub width: f64,
+    /// rad.
+    pub phase: f64,
+}
+
+impl ToothDamage {
+    /// The stiffness factor `1 − depth · w(u)` at shaft phase fraction `u ∈ [0, 1)`.
+    #[inline]
+    pub fn factor(&self, u: f64) -> f64 {
+        if u < self.width {
+            1.0 - self.depth * 0.5 * (1.0 - (std::f64::consts::TAU * u / self.width).cos())
+        } else {
+            1.0
+        }
+    }
+
+    fn validate(&self, name: &str) -> Result<()> {
+        if !(self.depth.is_finite() && (0.0..1.0).contains(&self.depth)) {
+            return Err(Error::param(
+                format!("{name}: tooth-damage depth"),
+                self.depth,
+                "must lie in [0, 1) so the stiffness stays positive",
+            ));
+        }
+        if !(self.shaft_ratio.is_finite() && self.shaft_ratio > 0.0) {
+            return Err(Error::param(
+                format!("{name}: tooth-damage shaft ratio"),
+                self.shaft_ratio,
+                "must be positive",
+            ));
+        }
+        if !(self.width > 0.0 && self.width <= 0.5 && self.phase.is_finite()) {
+            return Err(Error::param(
+                format!("{name}: tooth-damage pulse width"),
+                self.width,
+                "must lie in (0, 0.5] revolutions (and the phase be finite)",
+            ));
+        }
+        Ok(())
+    }
 }
 
 impl Element {
@@ -218,6 +282,7 @@ impl Element {
             backlash,
             error: Vec::new(),
             damping_in_contact_only: false,
+            tooth_damage: None,
         }
     }
 
@@ -241,6 +306,7 @@ impl Element {
             backlash: 0.0,
             error: Vec::new(),
             damping_in_contact_only: false,
+            tooth_damage: None,
         }
     }
 
@@ -258,6 +324,7 @@ impl Element {
             backlash: 0.0,
             error: Vec::new(),
             damping_in_contact_only: false,
+            tooth_damage: None,
         }
     }
 
@@ -282,6 +349,12 @@ impl Element {
     /// [`Element::damping_in_contact_only`]).
     pub fn with_contact_only_damping(mut self, on: bool) -> Self {
         self.damping_in_contact_only = on;
+        self
+    }
+
+    /// Give one gear of this mesh a damaged tooth ([`ToothDamage`]).
+    pub fn with_tooth_damage(mut self, damage: ToothDamage) -> Self {
+        self.tooth_damage = Some(damage);
         self
     }
 
@@ -339,6 +412,9 @@ impl Element {
                     "must be finite",
                 ));
             }
+        }
+        if let Some(t) = &self.tooth_damage {
+            t.validate(n)?;
         }
         self.shape.validate(n)
     }

@@ -26,7 +26,9 @@ pub mod system;
 pub mod wear;
 
 pub use assembly::Assembly;
-pub use element::{Damping, Dof, DofKind, Element, Harmonic, Load, LoadSchedule, StiffnessShape};
+pub use element::{
+    Damping, Dof, DofKind, Element, Harmonic, Load, LoadSchedule, StiffnessShape, ToothDamage,
+};
 #[cfg(test)]
 pub(crate) use kinematics::Frequencies;
 pub use reconstruct::{Reconstructor, static_state};

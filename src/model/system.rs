@@ -4,7 +4,7 @@ use std::f64::consts::TAU;
 
 use nalgebra::DMatrix;
 
-use super::element::{Harmonic, StiffnessShape};
+use super::element::{Harmonic, StiffnessShape, ToothDamage};
 use crate::error::{Error, Result};
 use crate::solver::OdeSystem;
 
@@ -48,6 +48,8 @@ pub struct DimensionlessModel {
     pub damping_in_contact_only: Vec<bool>,
     /// Error harmonics per element, amplitudes in units of `length_ref`.
     pub error: Vec<Vec<Harmonic>>,
+    /// Per element: a damaged tooth (stiffness dip once per revolution of its gear's shaft).
+    pub tooth_damage: Vec<Option<ToothDamage>>,
     /// Reference frequency `ω_h` (rad/s): `τ = ω_h t`.
     pub omega_h: f64,
     /// Reference length `b_ref` (m).
@@ -191,6 +193,8 @@ struct ElementRt {
     freq: usize,
     cos_phi: f64,
     sin_phi: f64,
+    /// A damaged tooth: (shaft angular frequency, phase fraction, damage).
+    damage: Option<(f64, f64, ToothDamage)>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -300,6 +304,12 @@ impl GearOde {
                 freq: freq_index(w),
                 cos_phi: m.phase[j].cos(),
                 sin_phi: m.phase[j].sin(),
+                damage: m
+                    .tooth_damage
+                    .get(j)
+                    .copied()
+                    .flatten()
+                    .map(|d| (d.shaft_ratio * omega1, d.phase / TAU, d)),
             });
         }
         let mut forcing = Vec::new();
@@ -352,6 +362,15 @@ impl GearOde {
     #[inline]
     fn stiffness(&self, j: usize, t: f64, sc: &[(f64, f64)]) -> f64 {
         let e = &self.el[j];
+        let k = self.healthy_stiffness(e, t, sc);
+        match e.damage {
+            None => k,
+            Some((w, ph, d)) => k * d.factor((w * t / TAU + ph).rem_euclid(1.0)),
+        }
+    }
+
+    #[inline]
+    fn healthy_stiffness(&self, e: &ElementRt, t: f64, sc: &[(f64, f64)]) -> f64 {
         match e.shape {
             ShapeRt::Constant => e.k,
             ShapeRt::FirstHarmonic(eps) => {

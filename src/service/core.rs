@@ -8,8 +8,8 @@ use anyhow::Context;
 use serde_json::json;
 
 use super::diagnoser::{Diagnoser, Input, MachineCalibration, Output};
-use crate::closed_loop::held::{HeldEffects, MAX_CORRECTION_DB, decolour};
-use crate::closed_loop::{CalibrateOptions, calibrate, refit_held};
+use crate::closed_loop::held::{HeldEffects, MAX_CORRECTION_DB};
+use crate::closed_loop::{CalibrateOptions, HeldRefit, calibrate, refit_held};
 use crate::diagnosis::{DiagnoseOptions, Matcher, diagnose_with, diagnose_with_spectrum};
 use crate::gearbox::Gearbox;
 use crate::record::Record;
@@ -92,13 +92,14 @@ impl TableDiagnoser {
         rec: &Record,
         d: &crate::diagnosis::Diagnosis,
         opts: &DiagnoseOptions,
-    ) -> crate::Result<(serde_json::Value, Vec<String>)> {
+    ) -> crate::Result<(serde_json::Value, Vec<String>, Option<HeldRefit>)> {
         let mut warnings = Vec::new();
         let (path_correction, uncorrected) = match held.path_resonance {
             Some((fr, zeta)) => {
                 let d0 = diagnose_with(rec, &self.table, &self.matcher, opts)?;
                 (
                     json!({"frequency_hz": fr, "damping_ratio": zeta,
+                           "peak_gain": held.path_peak_gain,
                            "max_correction_db": MAX_CORRECTION_DB}),
                     json!({"estimate": d0.wear_degree.estimate, "lower": d0.wear_degree.lower,
                            "upper": d0.wear_degree.upper}),
@@ -106,6 +107,7 @@ impl TableDiagnoser {
             }
             None => (serde_json::Value::Null, serde_json::Value::Null),
         };
+        let mut held_refit = None;
         let refit = if held.is_empty() {
             serde_json::Value::Null
         } else {
@@ -131,6 +133,7 @@ impl TableDiagnoser {
                             r.error_db, r.error_plain_db
                         ));
                     }
+                    held_refit = Some(r);
                     serde_json::to_value(r).unwrap_or_default()
                 }
                 Err(e) => {
@@ -149,8 +152,17 @@ impl TableDiagnoser {
                 "path_correction": path_correction,
                 "uncorrected_wear_degree": uncorrected,
                 "wear_refit": refit,
+                // Element effects are not in the signature table: the machine's wear (and so
+                // its alert level) is the refit's; a path stage alone is in the de-coloured
+                // `wear_degree`.
+                "alert_follows": if held.has_element_effect() && held_refit.is_some() {
+                    "wear_refit"
+                } else {
+                    "wear_degree"
+                },
             }),
             warnings,
+            held_refit.filter(|_| held.has_element_effect()),
         ))
     }
 }
@@ -168,9 +180,12 @@ impl Diagnoser for TableDiagnoser {
             .map(|c| held_effects(c).map(|h| (c, h)))
             .transpose()?;
         // A path stage is divided out of the spectrum before the ordinary feature extraction.
-        let corrected = match held.as_ref().and_then(|(_, h)| h.path_resonance) {
-            Some((fr, zeta)) => Some(Record {
-                samples: decolour(&rec.samples, rec.sample_rate, fr, zeta)?,
+        let corrected = match held
+            .as_ref()
+            .and_then(|(_, h)| h.decolour(&rec.samples, rec.sample_rate))
+        {
+            Some(x) => Some(Record {
+                samples: x?,
                 sample_rate: rec.sample_rate,
             }),
             None => None,
@@ -185,17 +200,27 @@ impl Diagnoser for TableDiagnoser {
         let spectrum = spectrum.filter(|_| corrected.is_none());
         let mut diagnosis =
             serde_json::to_value(&d).map_err(|e| crate::Error::Signal(e.to_string()))?;
+        let mut wear = (
+            d.wear_degree.estimate,
+            d.wear_degree.lower,
+            d.wear_degree.upper,
+        );
         if let Some((cal, h)) = &held {
-            let (c, warnings) = self.calibration_json(cal, h, &rec, &d, &opts)?;
+            let (c, warnings, refit) = self.calibration_json(cal, h, &rec, &d, &opts)?;
             diagnosis["calibration"] = c;
             if let Some(w) = diagnosis["warnings"].as_array_mut() {
                 w.extend(warnings.into_iter().map(Into::into));
             }
+            // The alert level (and the stored wear) follow the refit when it holds an
+            // element effect.
+            if let Some(r) = refit {
+                wear = (r.ea, r.ea_lower, r.ea_upper);
+            }
         }
         Ok(Output {
-            ea_estimate: d.wear_degree.estimate,
-            ea_lower: d.wear_degree.lower,
-            ea_upper: d.wear_degree.upper,
+            ea_estimate: wear.0,
+            ea_lower: wear.1,
+            ea_upper: wear.2,
             motion_state: d.motion_state.clone(),
             f1_hz: d.f1_hz,
             marks: d

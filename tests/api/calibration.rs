@@ -149,6 +149,14 @@ async fn calibrate_keep_use_and_clear(b: Backend) {
         (ea_refit - EA).abs() < (ea_table - EA).abs(),
         "refit {ea_refit} not closer to {EA} than the table's {ea_table}"
     );
+    // An element effect is held: the refit is continuous with an interval, and the alert level
+    // follows it.
+    let (lo, hi) = (
+        refit["ea_lower"].as_f64().unwrap(),
+        refit["ea_upper"].as_f64().unwrap(),
+    );
+    assert!(lo <= ea_refit && ea_refit <= hi && hi > lo, "{refit}");
+    assert_eq!(c["alert_follows"], "wear_refit");
     // Stored with the diagnosis too.
     let id = d["id"].as_str().unwrap();
     let r = app.get(&format!("/v1/diagnoses/{id}")).await;

@@ -1,0 +1,203 @@
+//! The residual after the fit: runs beyond a threshold ([`residual_features`]) and, for what
+//! the library does not hold, a plain-words guess a person can act on ([`annotate`]).
+//!
+//! The guesses, in order (the first that applies):
+//! 1. **Mains pickup**: two or more `extra` lines within tolerance of odd multiples of 50 Hz
+//!    (or of 60 Hz), or one such line at 50/60/150/180 Hz: "electrical pickup".
+//! 2. **Harmonic of another extra line**: its frequency an integer multiple (2–6) of a
+//!    stronger extra line's.
+//! 3. **Broadband**: a run wider than 0.05 f1: "a raised band: broadband noise, impacts,
+//!    bursts".
+//! 4. **Synchronous**: at `a f1 + n f_s` (a = 0, 1, 2; |n| ≤ 3; f_s the rate of a shaft of
+//!    the gearbox; or a multiple of another mesh frequency) within half a grid step: "an
+//!    unmodelled component synchronous with shaft …".
+//! 5. Otherwise **non-synchronous**: "a bearing or another machine?".
+//!
+//! `missing` runs: a line the model makes and the record lacks (wrong description, sensor
+//! position, or an over-predicted line). Tolerance: 1.5 grid steps (`1.5 f1 / 128`).
+
+use super::ResidualFeature;
+use super::spectrum::{GRID_PERIODS, grid_index};
+use crate::gearbox::Gearbox;
+
+/// Lines of one residual beyond ±`thr` dB (runs, reported at their extreme point).
+pub(crate) fn residual_features(
+    resid: &[f64],
+    measured_rel: &[f64],
+    r: &[f64],
+    f1: f64,
+    thr: f64,
+) -> Vec<ResidualFeature> {
+    let mut out = Vec::new();
+    let mut j = 0;
+    while j < resid.len() {
+        let sign = if resid[j] > thr {
+            1.0
+        } else if resid[j] < -thr {
+            -1.0
+        } else {
+            j += 1;
+            continue;
+        };
+        let start = j;
+        let mut best = j;
+        while j < resid.len() && sign * resid[j] > thr {
+            if sign * resid[j] > sign * resid[best] {
+                best = j;
+            }
+            j += 1;
+        }
+        out.push(ResidualFeature {
+            kind: if sign > 0.0 { "extra" } else { "missing" },
+            frequency_ratio: r[best],
+            frequency_hz: r[best] * f1,
+            size_db: resid[best],
+            level_db: measured_rel[best],
+            width_ratio: (j - start) as f64 / GRID_PERIODS,
+            guess: String::new(),
+        });
+    }
+    out
+}
+
+/// Mean of `m − f` over the grid points nearest `ratios` where the measurement stands `min_db`
+/// above the fitted noise floor (`None`: no such point).
+pub(crate) fn fingerprint_gap(
+    m: &[f64],
+    f: &[f64],
+    noise_db: f64,
+    ratios: &[f64],
+    min_db: f64,
+) -> Option<f64> {
+    let v: Vec<f64> = ratios
+        .iter()
+        .filter_map(|&x| grid_index(x))
+        .filter(|&j| m[j] > noise_db + min_db)
+        .map(|j| m[j] - f[j])
+        .collect();
+    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+}
+
+/// Fill `guess` of every feature (see the module docs). `f1` in Hz.
+pub(crate) fn annotate(features: &mut [ResidualFeature], gb: &Gearbox, f1: f64) {
+    let step_hz = f1 / GRID_PERIODS;
+    let tol_hz = 1.5 * step_hz;
+    let extra: Vec<usize> = (0..features.len())
+        .filter(|&i| features[i].kind == "extra")
+        .collect();
+    // 1. mains: odd harmonics of 50 or 60 Hz.
+    for mains in [50.0, 60.0] {
+        let near = |f: f64| -> Option<u32> {
+            let k = (f / mains).round();
+            (k >= 1.0 && (k as u32) % 2 == 1 && (f - k * mains).abs() <= tol_hz).then_some(k as u32)
+        };
+        let hits: Vec<(usize, u32)> = extra
+            .iter()
+            .filter_map(|&i| near(features[i].frequency_hz).map(|k| (i, k)))
+            .filter(|(i, _)| features[*i].guess.is_empty())
+            .collect();
+        let strong_single = hits.len() == 1 && hits[0].1 <= 3;
+        if hits.len() >= 2 || strong_single {
+            let ks: Vec<String> = hits.iter().map(|(_, k)| k.to_string()).collect();
+            for (i, k) in &hits {
+                features[*i].guess = format!(
+                    "{mains:.0} Hz mains and odd harmonics (this is × {k}; found × {}): \
+                     electrical pickup — check the sensor cable's shield and grounding",
+                    ks.join(", ")
+                );
+            }
+        }
+    }
+    // 2. harmonics of a stronger extra line.
+    for &i in &extra {
+        if !features[i].guess.is_empty() {
+            continue;
+        }
+        let fi = features[i].frequency_hz;
+        let base = extra.iter().copied().find(|&j| {
+            let fj = features[j].frequency_hz;
+            let k = (fi / fj).round();
+            j != i
+                && features[j].size_db >= features[i].size_db - 3.0
+                && (2.0..=6.0).contains(&k)
+                && (fi - k * fj).abs() <= tol_hz
+        });
+        if let Some(j) = base {
+            features[i].guess = format!(
+                "harmonic {:.0} of the extra line at {:.1} Hz: one source with harmonics",
+                (fi / features[j].frequency_hz).round(),
+                features[j].frequency_hz
+            );
+        }
+    }
+    // 3–5.
+    let mut shafts: Vec<(String, f64)> = gb
+        .shaft_ratios()
+        .into_iter()
+        .map(|(n, v)| (n, v.abs()))
+        .filter(|(_, v)| *v > 0.0)
+        .collect();
+    shafts.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let meshes: Vec<f64> = gb.mesh_ratios.clone();
+    let tol_r = 0.5 / GRID_PERIODS;
+    for f in features.iter_mut() {
+        if !f.guess.is_empty() {
+            continue;
+        }
+        let r = f.frequency_ratio;
+        if f.kind == "missing" {
+            f.guess = format!(
+                "the model has a line at {:.1} Hz ({r:.3} f1) that the record lacks \
+                 ({:.1} dB): the description, the sensor position or an over-predicted line",
+                f.frequency_hz, f.size_db
+            );
+            continue;
+        }
+        if f.width_ratio > 0.05 {
+            f.guess = format!(
+                "a raised band around {:.0} Hz ({:.2} f1 wide, {:+.1} dB): broadband noise, \
+                 impacts or noise bursts — not a line",
+                f.frequency_hz, f.width_ratio, f.size_db
+            );
+            continue;
+        }
+        let mut sync: Option<String> = None;
+        'outer: for (name, s) in &shafts {
+            for a in 0..=2 {
+                for n in -3i32..=3 {
+                    if a == 0 && n <= 0 {
+                        continue;
+                    }
+                    if (a as f64 + n as f64 * s - r).abs() <= tol_r {
+                        sync = Some(if a == 0 {
+                            format!("order {n} of shaft `{name}`")
+                        } else {
+                            format!("{a} f1 {:+} × shaft `{name}`", n)
+                        });
+                        break 'outer;
+                    }
+                }
+            }
+        }
+        if sync.is_none() {
+            for (k, fk) in meshes.iter().enumerate().skip(1) {
+                let h = (r / fk).round();
+                if (1.0..=4.0).contains(&h) && (r - h * fk).abs() <= tol_r {
+                    sync = Some(format!("{h:.0} × the stage-{} mesh frequency", k + 1));
+                    break;
+                }
+            }
+        }
+        f.guess = match sync {
+            Some(w) => format!(
+                "a line at {:.1} Hz synchronous with the gearbox ({w}) that the model does not \
+                 make: misalignment, a coupling, or a fault the library does not hold",
+                f.frequency_hz
+            ),
+            None => format!(
+                "a non-synchronous line at {:.1} Hz ({:+.1} dB): a bearing or another machine?",
+                f.frequency_hz, f.size_db
+            ),
+        };
+    }
+}
