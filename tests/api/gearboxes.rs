@@ -428,11 +428,9 @@ fn four_channel_csv(seed: u64, broken: bool) -> String {
         })
         .collect();
     let mut out = String::from("a1,a2,a3,a4\n");
-    for i in 0..cols[0].len() {
-        out.push_str(&format!(
-            "{},{},{},{}\n",
-            cols[0][i], cols[1][i], cols[2][i], cols[3][i]
-        ));
+    let rows = cols[0].iter().zip(&cols[1]).zip(&cols[2]).zip(&cols[3]);
+    for (((a, b), c), d) in rows {
+        out.push_str(&format!("{a},{b},{c},{d}\n"));
     }
     out
 }
