@@ -162,6 +162,15 @@ pub async fn baselines(
     Ok((fitted, counts))
 }
 
+/// A JSON object as `T` (serde alone also takes an array for a struct: `[null, null]`).
+fn json_object<T: serde::de::DeserializeOwned>(bytes: &[u8]) -> Result<T, String> {
+    let v: Value = serde_json::from_slice(bytes).map_err(|e| e.to_string())?;
+    if !v.is_object() {
+        return Err("the body must be a JSON object".into());
+    }
+    serde_json::from_value(v).map_err(|e| e.to_string())
+}
+
 /// `PUT /v1/machines/{id}` body.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -196,7 +205,7 @@ pub async fn put(
     }
     check_machine_id(&id)?;
     let body = read_body(&headers, body, SMALL_BODY).await?;
-    let b: MachineBody = serde_json::from_slice(&body).map_err(|e| {
+    let b: MachineBody = json_object(&body).map_err(|e| {
         ApiError::bad_request(
             "invalid-machine",
             "Invalid machine configuration",
@@ -368,7 +377,7 @@ pub async fn post_baseline(
     }
     let m = machine_or_404(&app, &id).await?;
     let body = read_body(&headers, body, SMALL_BODY).await?;
-    let b: MarkBody = serde_json::from_slice(&body).map_err(|e| {
+    let b: MarkBody = json_object(&body).map_err(|e| {
         ApiError::bad_request(
             "invalid-baseline",
             "Invalid baseline request",
