@@ -18,7 +18,8 @@ use super::auth::Caller;
 use super::diagnoser::Input;
 use super::error::{ApiError, ApiResult};
 use super::records::{
-    Decoded, body_format, check_machine_id, decode, parse_query, problem_from_error, read_body,
+    Decoded, body_format, check_machine_id, decode, json_response, parse_query, problem_from_error,
+    read_body,
 };
 use super::time::rfc3339;
 use crate::keys::Scope;
@@ -33,15 +34,6 @@ fn body(c: &CalibrationRow) -> Value {
         m.insert("created_at".into(), rfc3339(c.created_at).into());
     }
     v
-}
-
-fn json_response(status: StatusCode, v: &Value) -> Response {
-    let mut r = (status, v.to_string()).into_response();
-    r.headers_mut().insert(
-        header::CONTENT_TYPE,
-        HeaderValue::from_static("application/json"),
-    );
-    r
 }
 
 fn no_calibration(id: &str) -> ApiError {

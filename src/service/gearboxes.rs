@@ -25,7 +25,7 @@ use std::time::Duration;
 use axum::body::Body;
 use axum::extract::{Path, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
-use axum::response::{IntoResponse, Response};
+use axum::response::Response;
 use serde_json::{Value, json};
 use tokio::sync::watch;
 
@@ -34,7 +34,7 @@ use super::auth::Caller;
 use super::diagnoser::Diagnoser;
 use super::error::{ApiError, ApiResult};
 use super::read::json_with_etag;
-use super::records::read_body;
+use super::records::{json_response, read_body};
 use super::time::rfc3339;
 use crate::diagnosis::DiagnoseOptions;
 use crate::gearbox::description::{GearboxDescription, MAX_DESCRIPTION_BYTES, TextFormat};
@@ -54,12 +54,7 @@ const IDLE_POLL: Duration = Duration::from_secs(2);
 
 /// A gearbox id: like a machine id.
 pub fn check_gearbox_id(id: &str) -> ApiResult<()> {
-    let ok = !id.is_empty()
-        && id.len() <= 64
-        && id
-            .bytes()
-            .all(|b| b.is_ascii_alphanumeric() || b == b'.' || b == b'_' || b == b'-');
-    if ok {
+    if super::records::is_valid_id(id) {
         Ok(())
     } else {
         Err(ApiError::bad_request(
@@ -214,15 +209,6 @@ pub fn view(row: &GearboxRow, gb: Option<&Gearbox>, full: bool) -> Value {
         v["warnings"] = json!(gb.warnings);
     }
     v
-}
-
-fn json_response(status: StatusCode, v: &Value) -> Response {
-    let mut r = (status, v.to_string()).into_response();
-    r.headers_mut().insert(
-        header::CONTENT_TYPE,
-        HeaderValue::from_static("application/json"),
-    );
-    r
 }
 
 fn unknown_gearbox(id: &str) -> ApiError {

@@ -383,14 +383,18 @@ impl RecordQuery {
     }
 }
 
-/// Machine ids: 1–64 characters of `A–Z a–z 0–9 . _ -`.
-pub fn check_machine_id(id: &str) -> ApiResult<()> {
-    let ok = !id.is_empty()
+/// Whether `id` is 1–64 characters of `A–Z a–z 0–9 . _ -` (machine and gearbox ids).
+pub fn is_valid_id(id: &str) -> bool {
+    !id.is_empty()
         && id.len() <= 64
         && id
             .bytes()
-            .all(|b| b.is_ascii_alphanumeric() || b == b'.' || b == b'_' || b == b'-');
-    if ok {
+            .all(|b| b.is_ascii_alphanumeric() || b == b'.' || b == b'_' || b == b'-')
+}
+
+/// Machine ids: 1–64 characters of `A–Z a–z 0–9 . _ -`.
+pub fn check_machine_id(id: &str) -> ApiResult<()> {
+    if is_valid_id(id) {
         Ok(())
     } else {
         Err(ApiError::bad_request(
@@ -400,6 +404,16 @@ pub fn check_machine_id(id: &str) -> ApiResult<()> {
         )
         .with("machine_id", id))
     }
+}
+
+/// A JSON answer with `status`.
+pub fn json_response(status: StatusCode, v: &Value) -> Response {
+    let mut r = (status, v.to_string()).into_response();
+    r.headers_mut().insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static("application/json"),
+    );
+    r
 }
 
 fn parse_number(name: &'static str, v: &Option<String>) -> ApiResult<Option<f64>> {

@@ -225,44 +225,6 @@ async fn a_described_gearbox_is_tabled_in_the_background_and_diagnoses_its_machi
     assert_eq!(m["configuration"]["input_shaft_hz"], 25.0);
 }
 
-/// Records the paper rig's model does not explain: 25 tones between 300 Hz and 3 kHz (the
-/// same for every record of the machine) and noise that changes with `seed`.
-fn foreign_record(seed: u64, impulses: bool) -> Value {
-    let fs = 25_600.0;
-    let lcg = |state: &mut u64| {
-        *state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (*state >> 11) as f64 / (1u64 << 53) as f64
-    };
-    let mut tone_state = 42u64;
-    let tones: Vec<(f64, f64)> = (0..25)
-        .map(|_| {
-            let f = 300.0 + 2700.0 * lcg(&mut tone_state);
-            (f, 0.2 + 0.8 * lcg(&mut tone_state))
-        })
-        .collect();
-    let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(7);
-    let tau = std::f64::consts::TAU;
-    let x: Vec<f64> = (0..25_600)
-        .map(|i| {
-            let t = i as f64 / fs;
-            let mut v = tones
-                .iter()
-                .map(|(f, a)| a * (tau * f * t).sin())
-                .sum::<f64>()
-                + 0.6 * (lcg(&mut state) - 0.5);
-            // A broken tooth: a short ringing burst once per revolution (31.25 Hz).
-            if impulses {
-                let ph = (t * 31.25).fract() / 31.25;
-                v += 12.0 * (-ph * 2000.0).exp() * (tau * 4500.0 * ph).sin();
-            }
-            v
-        })
-        .collect();
-    json!({"sample_rate_hz": fs, "samples": x})
-}
-
 async fn a_baseline_makes_a_machine_the_model_does_not_fit_judgeable(b: Backend) {
     let Some(app) = spawn_app(b, |_| {}).await else {
         return;

@@ -362,6 +362,49 @@ pub fn json_record(seed: u64) -> Value {
     v
 }
 
+/// Records the paper rig's model does not explain (its fit is poor: with no baseline their
+/// alert level is `unknown`): 25 tones between 300 Hz and 3 kHz, the same for every record,
+/// and noise that changes with `seed`; `impulses` adds a broken tooth's ringing burst once per
+/// revolution (31.25 Hz). 1 s at 25.6 kHz.
+pub fn foreign_samples(seed: u64, impulses: bool) -> Vec<f64> {
+    let fs = 25_600.0;
+    let lcg = |state: &mut u64| {
+        *state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (*state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut tone_state = 42u64;
+    let tones: Vec<(f64, f64)> = (0..25)
+        .map(|_| {
+            let f = 300.0 + 2700.0 * lcg(&mut tone_state);
+            (f, 0.2 + 0.8 * lcg(&mut tone_state))
+        })
+        .collect();
+    let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(7);
+    let tau = TAU;
+    (0..25_600)
+        .map(|i| {
+            let t = i as f64 / fs;
+            let mut v = tones
+                .iter()
+                .map(|(f, a)| a * (tau * f * t).sin())
+                .sum::<f64>()
+                + 0.6 * (lcg(&mut state) - 0.5);
+            if impulses {
+                let ph = (t * 31.25).fract() / 31.25;
+                v += 12.0 * (-ph * 2000.0).exp() * (tau * 4500.0 * ph).sin();
+            }
+            v
+        })
+        .collect()
+}
+
+/// [`foreign_samples`] as a JSON record.
+pub fn foreign_record(seed: u64, impulses: bool) -> Value {
+    serde_json::json!({"sample_rate_hz": 25_600.0, "samples": foreign_samples(seed, impulses)})
+}
+
 // ---------- OpenAPI ----------
 
 pub fn spec() -> &'static Value {
