@@ -14,6 +14,9 @@
 //! `gearwear synth`) instead of the built-in four-sine record, which fits the model poorly and
 //! so takes the diagnosis's slowest path.
 //!
+//! `--requests N` stops after N requests (a fixed amount of work, e.g. for an instruction count
+//! of the server under callgrind: `scripts/record_path_profile.sh`).
+//!
 //! `--report-every S` prints one line per S-second window (records, errors, p50/p99, server
 //! RSS) so a soak shows start and end; the last line is a JSON summary for scripts.
 //!
@@ -88,6 +91,8 @@ async fn main() {
     let format = arg(&args, "--format", "json");
     let pid = arg(&args, "--pid", "");
     let record = arg(&args, "--record", "");
+    // `--requests N`: stop after N requests (0: no limit; `--seconds` still bounds the run).
+    let requests: usize = arg(&args, "--requests", "0").parse().unwrap();
     // The default record: four sines and a little noise (a poor fit to the model, so the
     // diagnosis tries every f1 candidate — the slow path); `--record FILE` sends any record
     // file `gearwear diagnose` reads (e.g. one written by `gearwear synth`), resampled to
@@ -178,7 +183,7 @@ async fn main() {
         } else {
             Instant::now()
         };
-        if due >= end {
+        if due >= end || (requests > 0 && i >= requests) {
             break;
         }
         if rate > 0.0 {

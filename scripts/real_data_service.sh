@@ -15,8 +15,9 @@ CH=${1:-a1}
 DATA=${GFD_DIR:-../shared/data/spectraquest-gfd}
 BASELINE_LOADS=${BASELINE_LOADS:-"0 20 60 80"}
 TARGET=${CARGO_TARGET_DIR:-target}
-cargo build --release --quiet --bin gearwear
-BIN=$TARGET/release/gearwear
+# GW_BIN: another binary (e.g. an older build, for a before/after) instead of this tree's.
+if [ -z "${GW_BIN:-}" ]; then cargo build --release --quiet --bin gearwear; fi
+BIN=${GW_BIN:-$TARGET/release/gearwear}
 work=$(mktemp -d /tmp/gearwear-realdata.XXXXXX)
 port=$((20000 + RANDOM % 20000))
 db="$work/gw.db"

@@ -50,9 +50,11 @@ for rec in ${BENCH_RECORDS:-model four}; do
       perf stat -a -x, -e instructions:u,cycles:u,cycles:k -o "$stat" -- sleep "$((secs + 1))" &
       perf_pid=$!
     fi
+    curl -fs "http://127.0.0.1:$port/metrics" >"$d/metrics.before" || true
     "$LG" --url "http://127.0.0.1:$port" --key "$key" --concurrency "${BENCH_CONCURRENCY:-4}" \
       --seconds "$secs" --format "$fmt" --pid "$pid" "${extra[@]}" 2>&1 | tail -1 >"$d/run.json"
     [ -n "$perf_pid" ] && wait "$perf_pid"
+    curl -fs "http://127.0.0.1:$port/metrics" >"$d/metrics.after" || true
     STAT="$stat" python3 -c "
 import json, os
 s = json.load(open('$d/run.json'))
@@ -67,6 +69,25 @@ if os.path.exists(os.environ['STAT']) and s['records']:
             ev[p[2]] = float(p[0]) / s['records'] / 1e6
     line += (f\"  per record: instructions {ev.get('instructions:u', float('nan')):.1f} M, cycles \"
              f\"user {ev.get('cycles:u', float('nan')):.1f} M kernel {ev.get('cycles:k', float('nan')):.1f} M\")
-print(line)"
+print(line)
+# The record path's CPU by stage (thread CPU time, /metrics; absent in binaries before it).
+def stages(p):
+    out = {}
+    try:
+        for l in open(p):
+            if l.startswith('gearwear_record_stage_cpu_seconds_total{'):
+                out[l.split('\"')[1]] = float(l.split()[-1])
+            if l.startswith('gearwear_records_accepted_total '):
+                out['_records'] = float(l.split()[-1])
+    except OSError:
+        pass
+    return out
+a, b = stages('$d/metrics.before'), stages('$d/metrics.after')
+n = b.get('_records', 0) - a.get('_records', 0)
+if n > 0 and len(b) > 1:
+    parts = [(k, (b[k] - a.get(k, 0.0)) / n * 1e3) for k in sorted(b) if k != '_records']
+    tot = sum(v for _, v in parts)
+    print('    stages, CPU ms/record: ' + ', '.join(f'{k} {v:.2f}' for k, v in parts)
+          + f'; sum {tot:.2f} of {s[\"server_cpu_ms_per_record\"]:.2f} (the rest: HTTP, store threads, kernel)')"
   done
 done

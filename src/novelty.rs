@@ -376,6 +376,19 @@ pub fn record_features(
     gearbox: Option<&Gearbox>,
     input_shaft_hz: Option<f64>,
 ) -> Result<RecordFeatures> {
+    record_features_with(rec, gearbox, input_shaft_hz, None)
+}
+
+/// [`record_features`] with the record's order analysis already done for the same gearbox
+/// (the diagnosis's [`crate::diagnosis::Diagnosis::order`], tracked from the f1 it found):
+/// its features are taken as they are instead of tracking the record a second time. Without
+/// `gearbox` it is ignored.
+pub fn record_features_with(
+    rec: &Record,
+    gearbox: Option<&Gearbox>,
+    input_shaft_hz: Option<f64>,
+    order: Option<&OrderAnalysis>,
+) -> Result<RecordFeatures> {
     let x = &rec.samples;
     let fs = rec.sample_rate;
     crate::record::check_sample_rate(fs)?;
@@ -383,7 +396,13 @@ pub fn record_features(
     let mut values = BTreeMap::new();
     plain_features(x, fs, &mut values)?;
     let mut indicators = serde_json::Map::new();
-    if let Some(gb) = gearbox {
+    if let (Some(_), Some(a)) = (gearbox, order) {
+        order_features(a, &mut values);
+        indicators.insert(
+            "order_tracking".into(),
+            serde_json::to_value(a).unwrap_or_default(),
+        );
+    } else if let Some(gb) = gearbox {
         let hint = input_shaft_hz
             .filter(|h| h.is_finite() && *h > 0.0)
             .map(|h| (h, 0.03))

@@ -92,8 +92,10 @@ async fn calibrate(
         ..
     } = dec;
     let input = Input {
-        samples,
-        sample_rate_hz,
+        record: crate::record::Record {
+            samples,
+            sample_rate: sample_rate_hz,
+        },
         shaft_hz,
         sensor,
         calibration: None,

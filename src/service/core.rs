@@ -169,10 +169,7 @@ impl TableDiagnoser {
 
 impl Diagnoser for TableDiagnoser {
     fn diagnose(&self, input: &Input) -> crate::Result<Output> {
-        let rec = Record {
-            samples: input.samples.clone(),
-            sample_rate: input.sample_rate_hz,
-        };
+        let rec = &input.record;
         let opts = self.options(input);
         let held = input
             .calibration
@@ -191,13 +188,15 @@ impl Diagnoser for TableDiagnoser {
             None => None,
         };
         let (d, spectrum) = diagnose_with_spectrum(
-            corrected.as_ref().unwrap_or(&rec),
+            corrected.as_ref().unwrap_or(rec),
             &self.table,
             &self.matcher,
             &opts,
         )?;
-        // The spectrum of a corrected copy is not the record's: the plot shows the record.
+        // The spectrum (and the order analysis) of a corrected copy is not the record's: the
+        // plot shows the record, and its features track the record itself.
         let spectrum = spectrum.filter(|_| corrected.is_none());
+        let order = d.order.clone().filter(|_| corrected.is_none());
         let mut diagnosis =
             serde_json::to_value(&d).map_err(|e| crate::Error::Signal(e.to_string()))?;
         let mut wear = (
@@ -206,7 +205,7 @@ impl Diagnoser for TableDiagnoser {
             d.wear_degree.upper,
         );
         if let Some((cal, h)) = &held {
-            let (c, warnings, refit) = self.calibration_json(cal, h, &rec, &d, &opts)?;
+            let (c, warnings, refit) = self.calibration_json(cal, h, rec, &d, &opts)?;
             diagnosis["calibration"] = c;
             if let Some(w) = diagnosis["warnings"].as_array_mut() {
                 w.extend(warnings.into_iter().map(Into::into));
@@ -236,19 +235,16 @@ impl Diagnoser for TableDiagnoser {
             }),
             diagnosis,
             spectrum,
+            order,
         })
     }
 
     fn calibrate(&self, input: &Input) -> crate::Result<serde_json::Value> {
-        let rec = Record {
-            samples: input.samples.clone(),
-            sample_rate: input.sample_rate_hz,
-        };
         let opts = CalibrateOptions {
             diagnose: self.options(input),
             ..CalibrateOptions::default()
         };
-        let report = calibrate(&rec, &self.table, &opts)?;
+        let report = calibrate(&input.record, &self.table, &opts)?;
         serde_json::to_value(&report).map_err(|e| crate::Error::Signal(e.to_string()))
     }
 

@@ -7,8 +7,8 @@ use serde_json::Value;
 /// A decoded record plus what the request said about it.
 #[derive(Debug, Clone)]
 pub struct Input {
-    pub samples: Vec<f64>,
-    pub sample_rate_hz: f64,
+    /// The samples and their rate (owned: the diagnosis reads them in place, no copy).
+    pub record: crate::record::Record,
     pub shaft_hz: Option<f64>,
     pub sensor: Option<String>,
     /// The machine's stored calibration, if it has one: the diagnosis then uses it.
@@ -53,6 +53,10 @@ pub struct Output {
     /// The record's Hann amplitude spectrum, when the diagnosis computed it for the samples as
     /// received (not for a calibration-corrected copy): the plot is drawn from it.
     pub spectrum: Option<crate::signal::Spectrum>,
+    /// The diagnosis's order analysis of the samples as received (not of a
+    /// calibration-corrected copy), tracked with the table's gearbox: the record's baseline
+    /// features reuse it.
+    pub order: Option<crate::novelty::OrderAnalysis>,
 }
 
 /// Diagnose one record. Errors are the library's, mapped to problem+json by the caller.

@@ -15,6 +15,7 @@ use super::AppState;
 use super::auth::Caller;
 use super::diagnoser::{Input, MachineCalibration};
 use super::error::{ApiError, ApiResult};
+use super::metrics::StageClock;
 use super::spectrum::{plot_from_spectrum, plot_spectrum};
 use crate::keys::Scope;
 use crate::store::{DiagnosisRow, IdemRow, Ingest, NewRecord, StoreError, new_id, now_ms};
@@ -952,7 +953,11 @@ async fn ingest(
     let format = body_format(headers)?;
     let q = parse_query(query.as_deref())?;
     let bytes = read_body(headers, body, limits.max_body_bytes).await?;
+    // CPU time by stage (`/metrics`), booked only for synchronous sections: a task may move to
+    // another thread at an await.
+    let mut clock = StageClock::new();
     let bytes = content_decoded(headers, bytes, limits.max_body_bytes)?;
+    clock.lap("decode");
 
     // Idempotency: replay the stored answer of an earlier identical request.
     let idem_key = match headers.get("idempotency-key") {
@@ -988,14 +993,17 @@ async fn ingest(
         }
         hex::encode(h.finalize())
     };
+    clock.lap("hash");
     if let Some(k) = &idem_key
         && let Some(prev) = app.store.get_idempotent(&key_id, k).await?
     {
         return replay(app, &prev, &request_hash);
     }
 
+    clock.skip();
     let dec = decode(format, &q, &bytes, limits)?;
     let baseline = q.baseline()?;
+    clock.lap("decode");
 
     // The machine's gearbox (and its table, when ready), baseline and calibration.
     let ctx = super::machines::context(app, machine_id).await?;
@@ -1025,10 +1033,12 @@ async fn ingest(
         declared_healthy: baseline,
         described: ctx.machine.as_ref().is_some_and(|m| m.gearbox_id.is_some()),
     };
-    let (dec, results, spectrum) = tokio::task::spawn_blocking(move || job.run())
+    let (dec, results, spectrum, job_clock) = tokio::task::spawn_blocking(move || job.run())
         .await
         .map_err(|e| ApiError::internal(format!("the diagnosis task failed: {e}")))?
         .map_err(|e| problem_from_error(&e))?;
+    clock.absorb(job_clock);
+    clock.skip();
     let Decoded {
         channels,
         sample_rate_hz: fs,
@@ -1173,6 +1183,7 @@ async fn ingest(
             response: response_text.clone(),
         }),
     };
+    clock.lap("assemble");
     match app.ingest_queue.ingest(ing).await {
         Ok(()) => {}
         Err(StoreError::Conflict(_)) if idem_key.is_some() => {
@@ -1188,6 +1199,7 @@ async fn ingest(
         Err(e) => return Err(e.into()),
     }
     app.metrics.records_accepted.fetch_add(1, Ordering::Relaxed);
+    app.metrics.stages(&clock);
     app.webhook_wake.notify_one();
     tracing::info!(machine = machine_id, diagnosis = %diagnosis_id, ea, alert_level = level, "record accepted");
     let mut r = (StatusCode::CREATED, response_text).into_response();
@@ -1226,30 +1238,34 @@ type JobResult = (
     Decoded,
     Vec<super::assess::ChannelResult>,
     Option<super::spectrum::PlotSpectrum>,
+    StageClock,
 );
 
 impl ChannelJob {
-    fn run(self) -> crate::Result<JobResult> {
+    fn run(mut self) -> crate::Result<JobResult> {
         use super::assess::{ChannelResult, alert, deciding};
         let fs = self.dec.sample_rate_hz;
         let shaft = self.shaft.or(self.dec.shaft_hz);
+        let mut clock = StageClock::new();
         let mut results = Vec::with_capacity(self.chosen.len());
         for &i in &self.chosen {
-            let (name, samples) = &self.dec.channels[i];
-            let rec = crate::record::Record {
-                samples: samples.clone(),
-                sample_rate: fs,
+            // The channel's samples move into the diagnosis input and back (no copy).
+            let name = self.dec.channels[i].0.clone();
+            let input = Input {
+                record: crate::record::Record {
+                    samples: std::mem::take(&mut self.dec.channels[i].1),
+                    sample_rate: fs,
+                },
+                shaft_hz: shaft,
+                sensor: self.dec.sensor.clone(),
+                calibration: self.calibration.clone(),
             };
+            let rec = &input.record;
             let output = match &self.diagnoser {
-                Some(d) => Some(d.diagnose(&Input {
-                    samples: samples.clone(),
-                    sample_rate_hz: fs,
-                    shaft_hz: shaft,
-                    sensor: self.dec.sensor.clone(),
-                    calibration: self.calibration.clone(),
-                })?),
+                Some(d) => Some(d.diagnose(&input)?),
                 None => None,
             };
+            clock.lap("diagnosis");
             let hint = shaft.or(self.input_shaft_hz).or(output
                 .as_ref()
                 .map(|o| o.f1_hz / self.gearbox.f1_per_input_hz));
@@ -1258,8 +1274,20 @@ impl ChannelJob {
             // features that make a baseline unstable); without one the features are
             // description-free.
             let gb = self.described.then_some(self.gearbox.as_ref());
-            let features = crate::novelty::record_features(&rec, gb, hint)?;
-            let novelty = self.baselines.get(name).map(|b| b.score(&features));
+            // A described machine's diagnosis ran on its own gearbox's table and tracked the
+            // record already: its order analysis is reused, not computed twice — when the f1
+            // it tracked from agrees (±1 %, its tracker's search) with the speed the features
+            // would start from (a given or configured shaft rate may disagree with a tacho-less
+            // diagnosis; then the record is tracked again from that rate).
+            let order = output
+                .as_ref()
+                .filter(|o| {
+                    hint.is_none_or(|h| (o.f1_hz / self.gearbox.f1_hz(h) - 1.0).abs() < 0.01)
+                })
+                .and_then(|o| o.order.as_ref());
+            let features = crate::novelty::record_features_with(rec, gb, hint, order)?;
+            self.dec.channels[i].1 = input.record.samples;
+            let novelty = self.baselines.get(&name).map(|b| b.score(&features));
             let alert = alert(
                 output.as_ref().map(ChannelResult::wear),
                 novelty.as_ref(),
@@ -1268,12 +1296,13 @@ impl ChannelJob {
                 self.declared_healthy,
             );
             results.push(ChannelResult {
-                name: name.clone(),
+                name,
                 output,
                 features,
                 novelty,
                 alert,
             });
+            clock.lap("features");
         }
         let di = deciding(&results);
         let samples = &self.dec.channels[self.chosen[di]].1;
@@ -1290,7 +1319,8 @@ impl ChannelJob {
                 plot_spectrum(samples, fs, f1, &[])
             }
         };
-        Ok((self.dec, results, spectrum))
+        clock.lap("plot");
+        Ok((self.dec, results, spectrum, clock))
     }
 }
 

@@ -636,15 +636,21 @@ macro_rules! impl_store {
         async fn ingest_in(tx: &mut sqlx::Transaction<'_, $db>, ing: &Ingest) -> StoreResult<()> {
                 let (rec, d) = (&ing.record, &ing.diagnosis);
                 // A write first: SQLite then takes its write lock at once (waiting on the busy
-                // timeout) instead of failing to upgrade a read lock later.
-                sqlx::query(
+                // timeout) instead of failing to upgrade a read lock later. The same statement
+                // hands back the machine's alert level before this record (the no-op update
+                // returns the stored row; a new machine's is the column default): one round trip
+                // instead of an insert and a select, and on PostgreSQL the row stays locked
+                // until the commit, so a concurrent record cannot read the same previous level.
+                let prev: String = sqlx::query(
                     "INSERT INTO machines (id, created_at, updated_at) VALUES ($1, $2, $2) \
-                     ON CONFLICT (id) DO NOTHING",
+                     ON CONFLICT (id) DO UPDATE SET updated_at = machines.updated_at \
+                     RETURNING alert_level",
                 )
                 .bind(&rec.machine_id)
                 .bind(rec.received_at)
-                .execute(&mut **tx)
-                .await?;
+                .fetch_one(&mut **tx)
+                .await?
+                .try_get("alert_level")?;
                 if let Some(i) = &ing.idempotency {
                     let r = sqlx::query(
                         "INSERT INTO idempotency_keys \
@@ -667,12 +673,6 @@ macro_rules! impl_store {
                         });
                     }
                 }
-                let prev: String =
-                    sqlx::query("SELECT alert_level FROM machines WHERE id = $1")
-                        .bind(&rec.machine_id)
-                        .fetch_one(&mut **tx)
-                        .await?
-                        .try_get("alert_level")?;
                 sqlx::query(
                     "INSERT INTO records (id, machine_id, received_at, recorded_at, sensor, \
                      content_type, sample_rate_hz, shaft_hz, sample_count, sha256, features, \
