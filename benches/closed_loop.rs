@@ -101,7 +101,9 @@ struct Row {
     /// eligible) — to read the margin's effect on the tuning seed.
     null_spread: f64,
     claim_margin: f64,
-    candidates: Vec<(String, f64, bool)>,
+    null_deviances: Vec<f64>,
+    /// (name, ΔBIC, eligible, fingerprint share, error dB)
+    candidates: Vec<(String, f64, bool, f64, f64)>,
 }
 
 fn std_diff(a: &[f64], b: &[f64]) -> f64 {
@@ -299,10 +301,19 @@ fn main() {
                     error: None,
                     null_spread: rep.null_spread,
                     claim_margin: rep.claim_margin,
+                    null_deviances: rep.null_deviances.clone(),
                     candidates: rep
                         .candidates
                         .iter()
-                        .map(|c| (c.name.clone(), c.delta_bic, c.eligible))
+                        .map(|c| {
+                            (
+                                c.name.clone(),
+                                c.delta_bic,
+                                c.eligible,
+                                c.fingerprint_share,
+                                c.error_db,
+                            )
+                        })
                         .collect(),
                 })
             };
@@ -333,6 +344,7 @@ fn main() {
                 error: Some(err),
                 null_spread: f64::NAN,
                 claim_margin: f64::NAN,
+                null_deviances: vec![],
                 candidates: vec![],
             });
             row.seconds = t.elapsed().as_secs_f64();
