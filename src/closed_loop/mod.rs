@@ -235,16 +235,19 @@ pub struct CalibrationReport {
     pub options: CalibrateOptions,
 }
 
-/// Simulated model spectra, cached by parameters.
+/// Cache key of a simulated spectrum: the element parameters and the initial state's seed.
+type SpectrumKey = ([u64; 6], u64);
+
+/// Simulated model spectra, cached by parameters and seed.
 struct Simulator<'a> {
     gb: &'a Gearbox,
     omega1: f64,
     periods: usize,
     seed: u64,
-    cache: Mutex<HashMap<([u64; 6], u64), Vec<f64>>>,
+    cache: Mutex<HashMap<SpectrumKey, Vec<f64>>>,
 }
 
-/// One point of a wear profile: the element parameters, the fitted sensor and the RSS.
+/// One point of a wear profile: the element parameters, the fitted sensor and the score.
 type ProfilePoint = (ElementParams, SensorFit, f64);
 
 impl Simulator<'_> {
