@@ -3,7 +3,8 @@
 //!
 //! `cargo bench --bench closed_loop` (env: `CL_N` records, default 110 (22 min on the shared 2-core machine); `CL_SEED` base seed,
 //! default 2 — seed 1 is the one thresholds may be looked at on, report on another; `CL_OUT`
-//! JSON rows; `CL_KINDS` a comma list to run only some kinds).
+//! JSON rows; `CL_KINDS` a comma list to run only some kinds; `CL_NULL_Z`, `CL_MARGIN` override
+//! `CalibrateOptions::null_z` and `bic_margin`, for tuning on seed 1 only).
 //!
 //! Every record: ea ~ U[0.1, 1], Ω1 ~ U over the table's band, gain log-uniform 1e-2 … 1e2,
 //! white noise at SNR ~ U[20, 30] dB, 16 kHz, 0.6 s, random initial state. Kinds cycle in a fixed
@@ -96,6 +97,13 @@ struct Row {
     zeta_ratio: Option<f64>,
     seconds: f64,
     error: Option<String>,
+    /// The selection's null spread and claim margin, and every candidate's (name, ΔBIC,
+    /// eligible) — to read the margin's effect on the tuning seed.
+    null_spread: f64,
+    claim_margin: f64,
+    null_deviances: Vec<f64>,
+    /// (name, ΔBIC, eligible, fingerprint share, error dB)
+    candidates: Vec<(String, f64, bool, f64, f64)>,
 }
 
 fn std_diff(a: &[f64], b: &[f64]) -> f64 {
@@ -253,7 +261,10 @@ fn main() {
                         std_diff(&m, &ls(&other.samples)?),
                     )
                 };
-                let rep = calibrate(&rec, &table, &CalibrateOptions::default())
+                let mut copts = CalibrateOptions::default();
+                copts.null_z = env("CL_NULL_Z", copts.null_z);
+                copts.bic_margin = env("CL_MARGIN", copts.bic_margin);
+                let rep = calibrate(&rec, &table, &copts)
                     .map_err(|e| e.to_string())?;
                 let named: Vec<String> = rep.effects.iter().map(|e| e.name.clone()).collect();
                 let (rho_ratio, zeta_ratio) = match (e.path_peak, rep.effects.iter().find(|x| x.name == "path-resonance")) {
@@ -288,6 +299,22 @@ fn main() {
                     zeta_ratio,
                     seconds: 0.0,
                     error: None,
+                    null_spread: rep.null_spread,
+                    claim_margin: rep.claim_margin,
+                    null_deviances: rep.null_deviances.clone(),
+                    candidates: rep
+                        .candidates
+                        .iter()
+                        .map(|c| {
+                            (
+                                c.name.clone(),
+                                c.delta_bic,
+                                c.eligible,
+                                c.fingerprint_share,
+                                c.error_db,
+                            )
+                        })
+                        .collect(),
                 })
             };
             let mut row = run().unwrap_or_else(|err| Row {
@@ -315,10 +342,14 @@ fn main() {
                 zeta_ratio: None,
                 seconds: 0.0,
                 error: Some(err),
+                null_spread: f64::NAN,
+                claim_margin: f64::NAN,
+                null_deviances: vec![],
+                candidates: vec![],
             });
             row.seconds = t.elapsed().as_secs_f64();
             eprintln!(
-                "{i:4} {kind:16} truth {:?} named {:?} vis {} err {:.2}->{:.2} ea {:.3} {:.3}->{:.3} [{:.3},{:.3}] {:.1}s{}",
+                "{i:4} {kind:16} truth {:?} named {:?} vis {} err {:.2}->{:.2} ea {:.3} {:.3}->{:.3} [{:.3},{:.3}] {:.1}s null {:.1} margin {:.1} best eligible {:?}{}",
                 row.truth,
                 row.named,
                 row.visible,
@@ -330,6 +361,13 @@ fn main() {
                 row.ea_lower,
                 row.ea_upper,
                 row.seconds,
+                row.null_spread,
+                row.claim_margin,
+                row.candidates
+                    .iter()
+                    .filter(|c| c.2)
+                    .min_by(|x, y| x.1.total_cmp(&y.1))
+                    .map(|c| format!("{} {:.1}", c.0, c.1)),
                 row.error.as_deref().map(|e| format!(" ERROR {e}")).unwrap_or_default()
             );
             row

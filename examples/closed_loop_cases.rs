@@ -130,10 +130,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             truth_pl,
         );
         if std::env::var("CL_VERBOSE").is_ok() {
+            eprintln!(
+                "   J_eff {:.1}, null spread {:.1}, claim margin {:.1}; wear after {:.3} [{:.3}, {:.3}]",
+                rep.effective_points,
+                rep.null_spread,
+                rep.claim_margin,
+                rep.wear_after.ea,
+                rep.wear_after.ea_lower,
+                rep.wear_after.ea_upper
+            );
             for c in &rep.candidates {
                 eprintln!(
-                    "   {:40} err {:6.2} dBIC {:8.1} fingerprint share {:5.2}",
-                    c.name, c.error_db, c.delta_bic, c.fingerprint_share
+                    "   {:40} err {:6.2} dBIC {:8.1} fingerprint share {:5.2} eligible {}",
+                    c.name, c.error_db, c.delta_bic, c.fingerprint_share, c.eligible
                 );
             }
         }

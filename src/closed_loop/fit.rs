@@ -82,6 +82,58 @@ pub(crate) fn db_add(a: f64, b: f64) -> f64 {
     m + 10.0 * (10f64.powf((a - m) / 10.0) + 10f64.powf((b - m) / 10.0)).log10()
 }
 
+/// How the residual `d_j = M_j − F_j` (dB) is scored: `u_j = d_j / σ_j` with a per-point
+/// standard deviation `σ_j` (the model's own seed-to-seed scatter, the record's Welch scatter,
+/// see `closed_loop::model_scatter`), and Huber's `ρ(u)` (`u²` up to `huber`, linear beyond) so
+/// that a few points of a line the library does not hold cannot dominate. [`Weights::unit`]
+/// is the plain sum of squares.
+#[derive(Debug, Clone)]
+pub struct Weights {
+    /// `1 / σ_j` per grid point.
+    pub inv_sigma: Vec<f64>,
+    /// Huber's threshold in units of `σ_j` (`f64::INFINITY`: least squares).
+    pub huber: f64,
+}
+
+impl Weights {
+    /// Unit weights, least squares (the plain RSS in dB²).
+    pub fn unit(n: usize) -> Weights {
+        Weights {
+            inv_sigma: vec![1.0; n],
+            huber: f64::INFINITY,
+        }
+    }
+
+    /// The pseudo-residual of `d` at point `j`: its square is `ρ(u_j)`.
+    pub fn pseudo(&self, j: usize, d: f64) -> f64 {
+        let u = d * self.inv_sigma[j];
+        let c = self.huber;
+        if u.abs() <= c {
+            u
+        } else {
+            u.signum() * (2.0 * c * u.abs() - c * c).sqrt()
+        }
+    }
+
+    /// `Σ_j ρ(u_j)` of the residual `m − f`.
+    pub fn score(&self, m: &[f64], f: &[f64]) -> f64 {
+        m.iter()
+            .zip(f)
+            .enumerate()
+            .map(|(j, (a, b))| self.pseudo(j, a - b).powi(2))
+            .sum()
+    }
+
+    /// The standardised residual `u_j` (no Huber cap).
+    pub fn standardised(&self, m: &[f64], f: &[f64]) -> Vec<f64> {
+        m.iter()
+            .zip(f)
+            .zip(&self.inv_sigma)
+            .map(|((a, b), w)| (a - b) * w)
+            .collect()
+    }
+}
+
 /// The fitted spectrum `F_j` (dB) of a model spectrum `s` through a sensor.
 pub(crate) fn sensor_model(s: &[f64], r: &[f64], sensor: &SensorFit) -> Vec<f64> {
     s.iter()
@@ -101,12 +153,14 @@ pub const ZETA_RANGE: (f64, f64) = (0.02, 0.5);
 pub const PEAK_GAIN_RANGE: (f64, f64) = (0.3, 40.0);
 
 /// Fit gain and noise (and, with `resonance`, the resonance of the same form starting there)
-/// of `s` to `m`.
+/// of `s` to `m`, minimising the score of `w` (returned: `Σ ρ(u_j)`, the RSS in dB² with
+/// [`Weights::unit`]).
 pub(crate) fn fit_sensor(
     m: &[f64],
     s: &[f64],
     r: &[f64],
     resonance: Option<Resonance>,
+    w: &Weights,
 ) -> (SensorFit, f64) {
     let i1 = grid_index(1.0).unwrap_or(0);
     let h1 = resonance.map_or(0.0, |h| h.gain_db(1.0));
@@ -126,7 +180,11 @@ pub(crate) fn fit_sensor(
     };
     let resid = |p: &[f64]| -> Vec<f64> {
         let f = sensor_model(s, r, &make(p));
-        m.iter().zip(&f).map(|(a, b)| a - b).collect()
+        m.iter()
+            .zip(&f)
+            .enumerate()
+            .map(|(j, (a, b))| w.pseudo(j, a - b))
+            .collect()
     };
     let (p, rss) = match resonance {
         None => lm(resid, &[g0, n0], &[-400.0, -400.0], &[400.0, 400.0]),
@@ -150,7 +208,7 @@ pub(crate) fn fit_sensor(
 /// (low-pass; peaking with `g` = 3, 8) is scored with only gain and noise fitted; the four
 /// best grid points at distinct frequencies (more than 8 % apart) each start a full
 /// Levenberg–Marquardt fit of every parameter; the lowest residual wins.
-pub(crate) fn search_resonance(m: &[f64], s: &[f64], r: &[f64]) -> (SensorFit, f64) {
+pub(crate) fn search_resonance(m: &[f64], s: &[f64], r: &[f64], w: &Weights) -> (SensorFit, f64) {
     let n_rho = 64;
     let mut scored: Vec<(Resonance, f64)> = Vec::new();
     for i in 0..n_rho {
@@ -163,7 +221,7 @@ pub(crate) fn search_resonance(m: &[f64], s: &[f64], r: &[f64]) -> (SensorFit, f
                     peak_gain: g,
                 };
                 let hs: Vec<f64> = s.iter().zip(r).map(|(a, b)| a + res.gain_db(*b)).collect();
-                let (_, rss) = fit_sensor(m, &hs, r, None);
+                let (_, rss) = fit_sensor(m, &hs, r, None, w);
                 scored.push((res, rss));
             }
         }
@@ -190,7 +248,7 @@ pub(crate) fn search_resonance(m: &[f64], s: &[f64], r: &[f64]) -> (SensorFit, f
             ..st
         };
         for start in [st, alt] {
-            let f = fit_sensor(m, s, r, Some(start));
+            let f = fit_sensor(m, s, r, Some(start), w);
             if best.as_ref().is_none_or(|b| f.1 < b.1) {
                 best = Some(f);
             }
@@ -229,6 +287,84 @@ pub fn effective_points(resid: &[f64]) -> f64 {
 /// simulated points) stays below the χ²₁ quantile of `level`. An interval reaching the end of
 /// the simulated range stops there.
 pub fn profile_interval(points: &[(f64, f64)], j_eff: f64, level: f64) -> (f64, f64, f64) {
+    interpolated_interval(points, j_eff, level, 0.0)
+}
+
+/// Half-width (units of ea) of the window of profile points a parabola is fitted to
+/// ([`profile_interval_noisy`]).
+pub const PROFILE_WINDOW: f64 = 0.25;
+
+/// The profile interval when every profile point is a simulation with its own scatter (a
+/// chaotic model from one initial state: the deviance `D(ea) = J_eff ln RSS(ea)` of each point
+/// carries a random error of about `noise_sd`, the spread of `D` over model seeds at one ea).
+/// A parabola `D ≈ c0 + c1 t + c2 t²` (t = ea − best) is fitted by least squares to the points
+/// within [`PROFILE_WINDOW`] of the best one (at least four); `ea` is its vertex and the
+/// interval `ea ± z sqrt(1/c2 + var(vertex))`: the likelihood interval of the smooth profile
+/// (`D − D_min ≤ z²`) widened by the vertex's own uncertainty, from the larger of the points'
+/// scatter about the parabola and `noise_sd` (delta method). Without a usable parabola (too few
+/// points, not convex, vertex outside the window) the interpolated profile is read as in
+/// [`profile_interval`] with the threshold raised by `z √2 noise_sd`. The interval stops at
+/// the simulated range.
+pub fn profile_interval_noisy(
+    points: &[(f64, f64)],
+    j_eff: f64,
+    level: f64,
+    noise_sd: f64,
+) -> (f64, f64, f64) {
+    let p = clean_profile(points);
+    if p.is_empty() {
+        return (f64::NAN, f64::NAN, f64::NAN);
+    }
+    let dev: Vec<f64> = p.iter().map(|(_, v)| j_eff * v.ln()).collect();
+    let ib = (0..p.len())
+        .min_by(|&a, &b| dev[a].total_cmp(&dev[b]))
+        .expect("non-empty");
+    let xb = p[ib].0;
+    let (x_lo, x_hi) = (p[0].0, p[p.len() - 1].0);
+    let z = normal_quantile(0.5 + level / 2.0);
+    let win: Vec<usize> = (0..p.len())
+        .filter(|&i| (p[i].0 - xb).abs() <= PROFILE_WINDOW + 1e-9)
+        .collect();
+    if win.len() >= 4 {
+        let n = win.len();
+        let x = DMatrix::<f64>::from_fn(n, 3, |i, k| (p[win[i]].0 - xb).powi(k as i32));
+        let y = DVector::<f64>::from_iterator(n, win.iter().map(|&i| dev[i]));
+        if let Some(inv) = (x.transpose() * &x).try_inverse() {
+            let c = &inv * x.transpose() * &y;
+            let (c1, c2) = (c[1], c[2]);
+            let span = win
+                .iter()
+                .map(|&i| (p[i].0 - xb).abs())
+                .fold(0.0_f64, f64::max);
+            if c2 > 0.0 {
+                let v = -c1 / (2.0 * c2);
+                if v.abs() <= span {
+                    let fitted = &x * &c;
+                    let ss: f64 = (0..n).map(|i| (y[i] - fitted[i]).powi(2)).sum();
+                    let sp = if n > 3 {
+                        (ss / (n - 3) as f64).sqrt()
+                    } else {
+                        0.0
+                    };
+                    let s = sp.max(noise_sd);
+                    let g = DVector::from_vec(vec![0.0, -1.0 / (2.0 * c2), c1 / (2.0 * c2 * c2)]);
+                    let var_v = s * s * (g.transpose() * &inv * &g)[(0, 0)];
+                    let half = z * (1.0 / c2 + var_v.max(0.0)).sqrt();
+                    let ea = (xb + v).clamp(x_lo, x_hi);
+                    return (ea, (ea - half).max(x_lo), (ea + half).min(x_hi));
+                }
+            }
+        }
+    }
+    interpolated_interval(
+        points,
+        j_eff,
+        level,
+        z * std::f64::consts::SQRT_2 * noise_sd,
+    )
+}
+
+fn clean_profile(points: &[(f64, f64)]) -> Vec<(f64, f64)> {
     let mut p: Vec<(f64, f64)> = points
         .iter()
         .copied()
@@ -236,6 +372,17 @@ pub fn profile_interval(points: &[(f64, f64)], j_eff: f64, level: f64) -> (f64, 
         .collect();
     p.sort_by(|a, b| a.0.total_cmp(&b.0));
     p.dedup_by(|a, b| (a.0 - b.0).abs() < 1e-9);
+    p
+}
+
+/// [`profile_interval`] with the χ²₁ threshold raised by `extra`.
+fn interpolated_interval(
+    points: &[(f64, f64)],
+    j_eff: f64,
+    level: f64,
+    extra: f64,
+) -> (f64, f64, f64) {
+    let p = clean_profile(points);
     if p.is_empty() {
         return (f64::NAN, f64::NAN, f64::NAN);
     }
@@ -264,7 +411,7 @@ pub fn profile_interval(points: &[(f64, f64)], j_eff: f64, level: f64) -> (f64, 
         }
     }
     let z = normal_quantile(0.5 + level / 2.0);
-    let thr = dmin + z * z;
+    let thr = dmin + z * z + extra;
     let cross = |i: usize, j: usize| -> f64 {
         // Linear interpolation of the deviance between p[i] (below thr) and p[j] (above).
         let (xa, ya, xb, yb) = (p[i].0, dev[i], p[j].0, dev[j]);
@@ -361,6 +508,52 @@ mod tests {
     }
 
     #[test]
+    fn noisy_profile_gives_a_smooth_vertex_and_a_wider_interval() {
+        // The parabola of the test above with a scatter of sd 3 on every point's deviance
+        // (simulations from one initial state): the vertex of the fitted parabola is near the
+        // truth and the interval widens with the scatter.
+        let j = 100.0;
+        let mut rng = crate::signature::SplitMix64::new(3);
+        let pts: Vec<(f64, f64)> = (0..19)
+            .map(|k| {
+                let ea = 0.1 + 0.05 * k as f64;
+                let d = (ea - 0.42).powi(2) / 0.01 + 50.0 + 3.0 * rng.normal();
+                (ea, (d / j).exp())
+            })
+            .collect();
+        let (ea0, lo0, hi0) = profile_interval_noisy(&pts, j, 0.9, 0.0);
+        let (ea, lo, hi) = profile_interval_noisy(&pts, j, 0.9, 6.0);
+        assert!((ea - 0.42).abs() < 0.06, "{ea}");
+        assert!((ea - ea0).abs() < 1e-12);
+        assert!(
+            lo <= ea && ea <= hi && lo < 0.42 && 0.42 < hi,
+            "[{lo}, {hi}]"
+        );
+        assert!(hi - lo > hi0 - lo0, "[{lo}, {hi}] vs [{lo0}, {hi0}]");
+        // Without scatter it is the parabola's own χ² interval, ± 0.1645.
+        let exact: Vec<(f64, f64)> = (0..19)
+            .map(|k| {
+                let ea = 0.1 + 0.05 * k as f64;
+                (ea, (((ea - 0.42).powi(2) / 0.01 + 50.0) / j).exp())
+            })
+            .collect();
+        let (e, l, h) = profile_interval_noisy(&exact, j, 0.9, 0.0);
+        assert!((e - 0.42).abs() < 1e-6 && (l - 0.2555).abs() < 1e-3 && (h - 0.5845).abs() < 1e-3);
+    }
+
+    #[test]
+    fn huber_weights_cap_a_large_residual() {
+        let w = Weights {
+            inv_sigma: vec![0.5; 3],
+            huber: 3.0,
+        };
+        assert!((w.pseudo(0, 4.0) - 2.0).abs() < 1e-12);
+        // u = 10: ρ = 2·3·10 − 9 = 51 instead of 100.
+        assert!((w.pseudo(1, 20.0).powi(2) - 51.0).abs() < 1e-9);
+        assert!(w.pseudo(2, -20.0) < 0.0);
+    }
+
+    #[test]
     fn normal_quantile_matches_tables() {
         assert!((normal_quantile(0.95) - 1.644_853_6).abs() < 1e-6);
         assert!((normal_quantile(0.975) - 1.959_964_0).abs() < 1e-6);
@@ -413,7 +606,7 @@ mod tests {
             resonance: Some(truth),
         };
         let m = sensor_model(&s, &r, &sens);
-        let (fit, rss) = search_resonance(&m, &s, &r);
+        let (fit, rss) = search_resonance(&m, &s, &r, &Weights::unit(r.len()));
         let h = fit.resonance.unwrap();
         assert!(rss < 1e-3, "rss {rss}");
         assert!((h.rho / 0.37 - 1.0).abs() < 0.02, "{h:?}");
