@@ -220,9 +220,39 @@ async fn a_described_gearbox_is_tabled_in_the_background_and_diagnoses_its_machi
         (d["f1_hz"].as_f64().unwrap() / 625.0 - 1.0).abs() < 0.02,
         "{d}"
     );
+    // The machine names its gearbox: its baseline features carry the order analysis, the one
+    // the diagnosis made (not a second tracking of the record, which could also disagree).
+    let track = &d["indicators"]["order_tracking"];
+    assert!(track["tracked_shaft"].is_string(), "{d}");
+    assert_eq!(track, &d["order"], "{d}");
     let m = get_json(&app, "/v1/machines/m-spur", "/v1/machines/{machine_id}").await;
     assert_eq!(m["gearbox"]["id"], "spur");
     assert_eq!(m["configuration"]["input_shaft_hz"], 25.0);
+
+    // The record path's CPU by stage is in /metrics, once per diagnosed record.
+    let text = app
+        .client
+        .get(app.url("/metrics"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    let runs = |stage: &str| -> f64 {
+        let k = format!("gearwear_record_stage_runs_total{{stage=\"{stage}\"}} ");
+        text.lines()
+            .find_map(|l| l.strip_prefix(k.as_str()))
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(0.0)
+    };
+    let posted = if early.status != "ready" { 2.0 } else { 1.0 };
+    assert_eq!(runs("features"), posted, "{text}");
+    assert!(runs("diagnosis") >= 1.0, "{text}");
+    assert!(
+        text.contains("gearwear_record_stage_cpu_seconds_total{stage=\"diagnosis\"}"),
+        "{text}"
+    );
 }
 
 async fn a_baseline_makes_a_machine_the_model_does_not_fit_judgeable(b: Backend) {
