@@ -311,14 +311,14 @@ pub fn profile_interval_noisy(
     level: f64,
     noise_sd: f64,
 ) -> (f64, f64, f64) {
-    let p = clean_profile(points);
-    if p.is_empty() {
+    let Some(DevianceProfile {
+        points: p,
+        dev,
+        best: ib,
+    }) = deviance_profile(points, j_eff)
+    else {
         return (f64::NAN, f64::NAN, f64::NAN);
-    }
-    let dev: Vec<f64> = p.iter().map(|(_, v)| j_eff * v.ln()).collect();
-    let ib = (0..p.len())
-        .min_by(|&a, &b| dev[a].total_cmp(&dev[b]))
-        .expect("non-empty");
+    };
     let xb = p[ib].0;
     let (x_lo, x_hi) = (p[0].0, p[p.len() - 1].0);
     let z = normal_quantile(0.5 + level / 2.0);
@@ -364,6 +364,22 @@ pub fn profile_interval_noisy(
     )
 }
 
+/// A profile's usable points in ea order with their deviances `J_eff ln RSS`, and the index of
+/// the smallest deviance.
+struct DevianceProfile {
+    points: Vec<(f64, f64)>,
+    dev: Vec<f64>,
+    best: usize,
+}
+
+/// `None` without a usable point.
+fn deviance_profile(points: &[(f64, f64)], j_eff: f64) -> Option<DevianceProfile> {
+    let points = clean_profile(points);
+    let dev: Vec<f64> = points.iter().map(|(_, v)| j_eff * v.ln()).collect();
+    let best = (0..points.len()).min_by(|&a, &b| dev[a].total_cmp(&dev[b]))?;
+    Some(DevianceProfile { points, dev, best })
+}
+
 fn clean_profile(points: &[(f64, f64)]) -> Vec<(f64, f64)> {
     let mut p: Vec<(f64, f64)> = points
         .iter()
@@ -382,14 +398,14 @@ fn interpolated_interval(
     level: f64,
     extra: f64,
 ) -> (f64, f64, f64) {
-    let p = clean_profile(points);
-    if p.is_empty() {
+    let Some(DevianceProfile {
+        points: p,
+        dev,
+        best: ib,
+    }) = deviance_profile(points, j_eff)
+    else {
         return (f64::NAN, f64::NAN, f64::NAN);
-    }
-    let dev: Vec<f64> = p.iter().map(|(_, v)| j_eff * v.ln()).collect();
-    let ib = (0..p.len())
-        .min_by(|&a, &b| dev[a].total_cmp(&dev[b]))
-        .expect("non-empty");
+    };
     let (mut ea, mut dmin) = (p[ib].0, dev[ib]);
     if ib > 0 && ib + 1 < p.len() {
         let (x0, x1, x2) = (p[ib - 1].0, p[ib].0, p[ib + 1].0);
