@@ -85,3 +85,21 @@ fn check_rate(sample_rate: f64) -> Result<()> {
     }
     Ok(())
 }
+
+/// Helpers the signal modules' unit tests share.
+#[cfg(test)]
+mod test_util {
+    /// Deterministic pseudo-random samples in [-1, 1) from a 64-bit LCG (Knuth's MMIX
+    /// constants).
+    pub fn lcg(n: usize, seed: u64) -> Vec<f64> {
+        let mut s = seed;
+        (0..n)
+            .map(|_| {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+            })
+            .collect()
+    }
+}

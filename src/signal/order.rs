@@ -690,20 +690,9 @@ pub fn samples_per_rev_for(fs: f64, shaft_hz: f64) -> usize {
 
 #[cfg(test)]
 mod tests {
+    use super::super::test_util::lcg;
     use super::*;
     use std::f64::consts::TAU;
-
-    fn lcg(n: usize, seed: u64) -> Vec<f64> {
-        let mut s = seed;
-        (0..n)
-            .map(|_| {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-            })
-            .collect()
-    }
 
     /// A gear record with a known angle: shaft rate `f(t) = f0 (1 + ramp (2t/T − 1))`,
     /// mesh tone of order `z` (amplitude 1), its second harmonic (0.4), first-order sidebands

@@ -259,19 +259,8 @@ pub(crate) fn subtract_sinusoid(x: &mut [f64], cyc: f64, a: f64, b: f64) {
 
 #[cfg(test)]
 mod tests {
+    use super::super::test_util::lcg;
     use super::*;
-
-    fn lcg(n: usize, seed: u64) -> Vec<f64> {
-        let mut s = seed;
-        (0..n)
-            .map(|_| {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-            })
-            .collect()
-    }
 
     #[test]
     fn sums_match_direct_evaluation() {

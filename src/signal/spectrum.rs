@@ -302,22 +302,10 @@ pub fn line_amplitude(x: &[f64], sample_rate: f64, freq: f64) -> Result<f64> {
 
 #[cfg(test)]
 mod tests {
+    use super::super::test_util::lcg;
     use super::super::window::window;
     use super::*;
     use std::f64::consts::PI;
-
-    /// Deterministic pseudo-random samples in [-1, 1) from a 64-bit LCG (Knuth's MMIX constants).
-    fn lcg(n: usize, seed: u64) -> Vec<f64> {
-        let mut s = seed;
-        (0..n)
-            .map(|_| {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-            })
-            .collect()
-    }
 
     /// Windows written out independently of `window()` for rectangular and Hann.
     fn reference_window(kind: Window, n: usize) -> Vec<f64> {

@@ -274,20 +274,9 @@ pub fn gear_metrics_and_signals(
 
 #[cfg(test)]
 mod tests {
+    use super::super::test_util::lcg;
     use super::*;
     use std::f64::consts::TAU;
-
-    fn lcg(n: usize, seed: u64) -> Vec<f64> {
-        let mut s = seed;
-        (0..n)
-            .map(|_| {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-            })
-            .collect()
-    }
 
     /// Approximately Gaussian samples (sum of 12 uniforms − 6, variance 1).
     fn gauss(n: usize, seed: u64) -> Vec<f64> {
