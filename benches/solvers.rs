@@ -596,13 +596,7 @@ fn run_os<const N: usize>(p: &Problem, rtol: f64, atol: f64) -> Run {
 // ---------------------------------------------------------------------------------------------
 
 fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let m = v.len() / 2;
-    if v.len() % 2 == 1 {
-        v[m]
-    } else {
-        0.5 * (v[m - 1] + v[m])
-    }
+    gearwear::signal::median(&mut v)
 }
 
 /// Median wall time of `reps` runs after one warm-up run, and the last run.

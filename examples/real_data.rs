@@ -59,13 +59,7 @@ fn auc(pos: &[f64], neg: &[f64]) -> f64 {
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
+    gearwear::signal::median(&mut v)
 }
 
 struct FileData {

@@ -67,7 +67,7 @@ use crate::signal::order::{
     MeshTrackOptions, TrackSummary, angular_resample, samples_per_rev_for, track_mesh_phase_with,
 };
 use crate::signal::tsa::{GearMetrics, gear_metrics_and_signals, tsa};
-use crate::signal::{Window, kurtosis, welch};
+use crate::signal::{Window, kurtosis, median, welch};
 use crate::{Error, Result};
 
 /// Fewest records a baseline is fitted from.
@@ -505,16 +505,6 @@ pub struct MachineBaseline {
     pub loo_scores: Vec<f64>,
     /// The threshold rule, in words.
     pub rule: String,
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
 }
 
 /// Location and scale of every feature that at least `min_records` records have

@@ -38,6 +38,7 @@ use std::fmt;
 use rustfft::FftPlanner;
 use rustfft::num_complex::Complex64;
 
+use crate::signal::median;
 use crate::{Error, Result};
 
 /// Fraction of points allowed to violate the periodicity criterion (start-up transients,
@@ -780,16 +781,6 @@ fn correlation_with_index(d: &[f64], xi_mean: f64, xi_ss: f64) -> f64 {
         return 0.0;
     }
     cov / (xi_ss * d_ss).sqrt()
-}
-
-fn median(values: &mut [f64]) -> f64 {
-    values.sort_by(f64::total_cmp);
-    let n = values.len();
-    if n % 2 == 1 {
-        values[n / 2]
-    } else {
-        0.5 * (values[n / 2 - 1] + values[n / 2])
-    }
 }
 
 /// 64-bit linear congruential generator (Knuth's MMIX constants); deterministic, good enough

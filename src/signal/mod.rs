@@ -41,7 +41,7 @@ mod window;
 pub(crate) use phasor::{dtft_sums, unit_phasors};
 pub use plan::PlanCache;
 pub use spectrum::{Spectrum, amplitude_spectrum, line_amplitude, welch};
-pub use stats::{crest_factor, kurtosis, rms, try_crest_factor, try_kurtosis, try_rms};
+pub use stats::{crest_factor, kurtosis, median, rms, try_crest_factor, try_kurtosis, try_rms};
 pub use window::{Window, shared_window, window};
 
 use crate::{Error, Result};

@@ -11,6 +11,20 @@ fn mean(x: &[f64]) -> f64 {
     x.iter().sum::<f64>() / x.len() as f64
 }
 
+/// The median of `values` (sorted in place; the mean of the two middle values for an even
+/// count; NaN for none).
+pub fn median(values: &mut [f64]) -> f64 {
+    values.sort_by(f64::total_cmp);
+    let n = values.len();
+    if n == 0 {
+        f64::NAN
+    } else if n % 2 == 1 {
+        values[n / 2]
+    } else {
+        0.5 * (values[n / 2 - 1] + values[n / 2])
+    }
+}
+
 /// Root mean square `sqrt(Σ x² / N)`, in the unit of `x`. Not mean-removed: a constant `c`
 /// has RMS `|c|`, a sine of amplitude `A` over whole periods has RMS `A/√2`.
 ///
@@ -98,6 +112,13 @@ pub fn crest_factor(x: &[f64]) -> f64 {
 mod tests {
     use super::*;
     use std::f64::consts::{PI, SQRT_2};
+
+    #[test]
+    fn median_of_odd_even_and_no_values() {
+        assert_eq!(median(&mut [3.0, -1.0, 2.0]), 2.0);
+        assert_eq!(median(&mut [4.0, 1.0, 3.0, 2.0]), 2.5);
+        assert!(median(&mut []).is_nan());
+    }
 
     /// `periods` whole periods of `a sin(2πt)` with `per` samples per period, phase 0 so that
     /// a sample lands on each peak when `per` is a multiple of 4.
