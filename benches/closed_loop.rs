@@ -104,6 +104,10 @@ struct Row {
     null_deviances: Vec<f64>,
     /// (name, ΔBIC, eligible, fingerprint share, error dB)
     candidates: Vec<(String, f64, bool, f64, f64)>,
+    /// The record's tacho-less condition indicators (the diagnosis's): FM4 of the difference
+    /// signal, kurtosis of the record.
+    fm4: f64,
+    kurtosis: f64,
 }
 
 fn std_diff(a: &[f64], b: &[f64]) -> f64 {
@@ -261,6 +265,19 @@ fn main() {
                         std_diff(&m, &ls(&other.samples)?),
                     )
                 };
+                let ci = gearwear::diagnosis::diagnose(&rec, &table, &Default::default())
+                    .map(|d| (d.condition_indicators.fm4, d.condition_indicators.kurtosis))
+                    .unwrap_or((f64::NAN, f64::NAN));
+                if std::env::var("CL_INDICATORS_ONLY").is_ok() {
+                    return Err(format!(
+                        "indicators only: fm4 {:.3} kurtosis {:.3} tooth {:?} wander {:?} visible {}",
+                        ci.0,
+                        ci.1,
+                        e.tooth,
+                        e.speed_wander,
+                        v_effect > v_noise
+                    ));
+                }
                 let mut copts = CalibrateOptions::default();
                 copts.null_z = env("CL_NULL_Z", copts.null_z);
                 copts.bic_margin = env("CL_MARGIN", copts.bic_margin);
@@ -315,6 +332,8 @@ fn main() {
                             )
                         })
                         .collect(),
+                    fm4: ci.0,
+                    kurtosis: ci.1,
                 })
             };
             let mut row = run().unwrap_or_else(|err| Row {
@@ -346,6 +365,8 @@ fn main() {
                 claim_margin: f64::NAN,
                 null_deviances: vec![],
                 candidates: vec![],
+                fm4: f64::NAN,
+                kurtosis: f64::NAN,
             });
             row.seconds = t.elapsed().as_secs_f64();
             eprintln!(

@@ -17,17 +17,22 @@
 //!    around the best), a
 //!    path resonance searched over the whole band ([`fit::search_resonance`]), each element
 //!    effect (shaft modulation on either shaft of the reference mesh, planetary wear, a damaged
-//!    tooth on either gear of the reference mesh: amplitude scaled from the residual at its
-//!    fingerprint lines, ea profiled locally, amplitude again), and the pairs. Scored by
+//!    tooth on either gear of the reference mesh: the modulation amplitude scaled from the
+//!    residual at its sideband lines, the planetary error and the tooth's stiffness loss by
+//!    their score over a grid; ea profiled locally, amplitude again), and the pairs. Scored by
 //!    `BIC = J ln(Σρ/J) + k ln J` (J grid points).
 //! 6. **Selection**: only candidates whose improvement falls on their fingerprint
 //!    ([`SUPPORT_SHARE`], see [`Candidate::fingerprint_share`]) and that lower the plain RMS
 //!    error are eligible; the lowest BIC of the eligible single effects wins if it beats "no
 //!    effect" by `bic_margin + null_z · null_spread` (`null_spread`: the standard deviation of
-//!    the plain model's deviance over the model seeds — what luck alone gives); a pair replaces
-//!    it only if each member is significant on its own and the pair beats the best single by
-//!    that margin.
-//! 7. **Refit**: the chosen model's ea is profiled the same way; a parabola fitted to the
+//!    the plain model's deviance over the model seeds — what luck alone gives; times
+//!    [`TOOTH_MARGIN_FACTOR`] for tooth damage); a pair replaces
+//!    it only if each member is eligible on its own with a BIC below "no effect"'s and the pair
+//!    beats the best single by that margin.
+//! 7. **Refit**: a path resonance alone — the record de-coloured by the fitted `|H|`
+//!    ([`held::decolour_with`]) and diagnosed again: the table's posterior is the wear
+//!    (`table-posterior-decoloured`). With an element effect, the chosen model's ea is
+//!    profiled the same way; a parabola fitted to the
 //!    profile's deviance near its minimum gives `wear_after.ea` (its vertex) and the interval
 //!    (the χ²₁ likelihood interval of the parabola widened by the vertex's uncertainty from the
 //!    simulations' scatter, [`fit::profile_interval_noisy`]). With no effect claimed (or a
@@ -117,7 +122,9 @@ pub struct WearEstimate {
     pub ea_upper: f64,
     /// Planetary composite-error amplitude (units of b; baseline 0.1).
     pub planetary: f64,
-    /// Where `ea` and its interval come from: `table-posterior` or `profile-likelihood`.
+    /// Where `ea` and its interval come from: `table-posterior`, `profile-likelihood` (an
+    /// element effect claimed: the refit's profile) or `table-posterior-decoloured` (a path
+    /// stage alone claimed: the table's posterior on the record divided by the fitted `|H|`).
     pub method: &'static str,
 }
 
@@ -162,6 +169,20 @@ pub const SUPPORT_SHARE: f64 = 0.25;
 /// more than 3 dB relative to f1 to be eligible (its `fingerprint_share` is otherwise reported
 /// as ≤ 0).
 pub const MIN_COLOURED_LINES: usize = 3;
+
+/// A candidate holding tooth damage must beat "no effect" (and a pair the best single) by this
+/// many claim margins. Its fingerprint, the shaft's whole order comb, covers most of the grid
+/// (all of it for a gear of many teeth), so the attribution check hardly tests it, and two
+/// variants (one per gear) are tried. Set on seeds 4 and 5 of the benchmark (1.0: speed wander
+/// and noise bursts claimed as tooth damage; 2.0 and more: fewer true ones named).
+pub const TOOTH_MARGIN_FACTOR: f64 = 1.5;
+
+/// Stiffness losses a damaged-tooth candidate is scored at (then refined between neighbours).
+const TOOTH_SCAN: [f64; 7] = [0.05, 0.1, 0.2, 0.35, 0.5, 0.7, 0.9];
+
+/// Planetary error amplitudes (units of b) a planetary-wear candidate is scored at (those
+/// above the gearbox's baseline; then refined between neighbours).
+const PLANETARY_SCAN: [f64; 7] = [0.2, 0.35, 0.6, 1.0, 1.7, 3.0, 5.0];
 
 /// A residual feature: a run of grid points beyond the threshold.
 #[derive(Debug, Clone, Serialize)]
@@ -774,6 +795,47 @@ pub fn calibrate(
         let a2 = fit_amp(&|a| set(refined, a), a1, ratios, lo, hi)?;
         Ok(set(refined, a2))
     };
+    // An element effect whose lines the grid cannot measure one by one (a damaged tooth on a
+    // gear of many teeth puts its sidebands 1.3 grid steps apart, inside the mesh line's own
+    // main lobe; the planetary family sits far below f1): the amplitude by its score, not by
+    // a gap at lines. Every amplitude of `grid` simulated at `base` (rayon, cached), the best
+    // kept; ea profiled within ±0.05; then the best amplitude's neighbours on a grid twice as
+    // fine, at the refined ea.
+    let element_scan = |base: ElementParams,
+                        set: &(dyn Fn(ElementParams, f64) -> ElementParams + Sync),
+                        grid: &[f64]|
+     -> Result<ElementParams> {
+        let scan = |b: ElementParams, amps: &[f64]| -> Result<(f64, f64)> {
+            let scored: Vec<(f64, f64)> = amps
+                .par_iter()
+                .map(|&a| {
+                    let sp = sim.spectrum(&set(b, a))?;
+                    Ok((a, fit_sensor(&m, &sp, &r, None, w).1))
+                })
+                .collect::<Result<_>>()?;
+            Ok(scored
+                .into_iter()
+                .min_by(|x, y| x.1.total_cmp(&y.1))
+                .expect("a non-empty amplitude grid"))
+        };
+        let (a1, _) = scan(base, grid)?;
+        let first = set(base, a1);
+        let prof = sim.profile(&m, &r, first, &ea_window(first.ea), None, None, w)?;
+        let (refined, _, _) = best_point(&prof);
+        let i = grid
+            .iter()
+            .position(|g| (g - a1).abs() <= 1e-12)
+            .unwrap_or(0);
+        let mut local = vec![a1];
+        if i > 0 {
+            local.push(0.5 * (grid[i - 1] + a1));
+        }
+        if i + 1 < grid.len() {
+            local.push(0.5 * (grid[i + 1] + a1));
+        }
+        let (a2, _) = scan(refined, &local)?;
+        Ok(set(refined, a2))
+    };
     let mut singles: Vec<(String, ElementParams)> = Vec::new();
     for sh in &shafts {
         let s = sh.shaft_ratio;
@@ -788,22 +850,26 @@ pub fn calibrate(
     }
     if f3.is_some() {
         let set = |b: ElementParams, p: f64| ElementParams { planetary: p, ..b };
-        let p = element_fit(pn, &set, 1.0, &fam, baseline_planetary, 5.0)?;
+        let grid: Vec<f64> = PLANETARY_SCAN
+            .iter()
+            .copied()
+            .filter(|p| *p > baseline_planetary)
+            .collect();
+        let p = if grid.is_empty() {
+            element_fit(pn, &set, 1.0, &fam, baseline_planetary, 5.0)?
+        } else {
+            element_scan(pn, &set, &grid)?
+        };
         singles.push((PLANETARY_WEAR.into(), p));
     }
     for g in &gears {
         let s = g.shaft_ratio;
-        // The comb k f1 ± n s (k = 1, 2; n = 2 … 5): n = 1 is shared with shaft modulation.
-        let comb: Vec<f64> = [1.0, 2.0]
-            .iter()
-            .flat_map(|c| (2..=5).flat_map(move |n| [c - n as f64 * s, c + n as f64 * s]))
-            .collect();
         let set = move |b: ElementParams, dep: f64| ElementParams {
             tooth_depth: dep,
             tooth_shaft: s,
             ..b
         };
-        let p = element_fit(pn, &set, 0.3, &comb, 0.02, 0.9)?;
+        let p = element_scan(pn, &set, &TOOTH_SCAN)?;
         singles.push((TOOTH_DAMAGE.into(), p));
     }
     let make = |name: String, p: ElementParams, res: Option<Resonance>| -> Result<Fitted> {
@@ -885,8 +951,8 @@ pub fn calibrate(
     // correction, which moves every line, does not count) that falls on its fingerprint points
     // (the plain model's own lines for a path stage — a resonance colours what the gearbox
     // makes; the sidebands ± s of its shaft around every line of the plain model (and
-    // 1, 2 f1) for shaft modulation; the comb
-    // k f1 ± n s (n = 1 … 5) for tooth damage; a f1 ± c f3 (a = 0, 1, 2; c = 1, 2) for
+    // 1, 2 f1) for shaft modulation; the shaft's order comb m s (all m) for tooth damage;
+    // a f1 ± c f3 (a = 0, 1, 2; c = 1, 2) for
     // planetary wear; ±1 grid point) must reach [`SUPPORT_SHARE`]; otherwise the candidate is
     // not eligible.
     let f_none = sensor_model(&sim.spectrum(&cands[0].params)?, &r, &cands[0].sensor);
@@ -943,13 +1009,14 @@ pub fn calibrate(
                         .collect();
                     near(&sb, &mut mask)
                 }
-                TOOTH_DAMAGE => {
-                    let comb: Vec<f64> = [1.0, 2.0]
-                        .iter()
-                        .flat_map(|c| {
-                            (1..=5).flat_map(move |n| [c - n as f64 * s, c + n as f64 * s])
-                        })
-                        .collect();
+                TOOTH_DAMAGE if s > 0.0 => {
+                    // A pulse one mesh period long, once a revolution: shaft-order sidebands
+                    // of about equal size out to ± z/2 orders around every mesh harmonic,
+                    // i.e. the shaft's whole order comb m s over the band (for a gear of many
+                    // teeth that is every grid point: then only the score and the error
+                    // decide).
+                    let top = (r[r.len() - 1] / s).ceil() as usize;
+                    let comb: Vec<f64> = (1..=top).map(|k| k as f64 * s).collect();
                     near(&comb, &mut mask);
                 }
                 _ => near(&fam_wide, &mut mask),
@@ -1001,28 +1068,35 @@ pub fn calibrate(
     let none_ref = null_dev.iter().copied().fold(f64::INFINITY, f64::min);
     let bic0 = scores[0].min(none_ref + 3.0 * j_n.ln());
     let eligible = |i: usize| support[i] >= SUPPORT_SHARE && rss_unw[i] <= rss0;
-    let best_of = |pred: &dyn Fn(&Fitted) -> bool| {
+    let best_of = |pred: &dyn Fn(usize) -> bool| {
         (0..cands.len())
-            .filter(|&i| pred(&cands[i]) && eligible(i))
+            .filter(|&i| pred(i) && eligible(i))
             .min_by(|&a, &b| scores[a].total_cmp(&scores[b]))
     };
-    let significant = |name: &str| {
+    // A pair's member must be eligible on its own and better than "no effect" (its BIC below
+    // the null's); the pair as a whole must then beat the best single by the claim margin.
+    let supported = |name: &str| {
         cands.iter().zip(&scores).enumerate().any(|(i, (c, b))| {
-            c.effects.len() == 1
-                && c.effects[0].name == name
-                && *b < bic0 - claim_margin
-                && eligible(i)
+            c.effects.len() == 1 && c.effects[0].name == name && *b < bic0 && eligible(i)
         })
     };
+    let margin_of = |c: &Fitted| {
+        if c.effects.iter().any(|e| e.name == TOOTH_DAMAGE) {
+            TOOTH_MARGIN_FACTOR * claim_margin
+        } else {
+            claim_margin
+        }
+    };
     let mut chosen = 0;
-    if let Some(single) = best_of(&|c| c.effects.len() == 1)
-        && scores[single] < bic0 - claim_margin
+    // The best single effect that beats "no effect" by its margin.
+    if let Some(single) =
+        best_of(&|i| cands[i].effects.len() == 1 && scores[i] < bic0 - margin_of(&cands[i]))
     {
         chosen = single;
-        if let Some(pair) = best_of(&|c| c.effects.len() == 2) {
-            // A pair needs every member significant on its own, and to beat the best single.
-            let members_ok = cands[pair].effects.iter().all(|e| significant(&e.name));
-            if members_ok && scores[pair] < scores[single] - claim_margin {
+        if let Some(pair) = best_of(&|i| cands[i].effects.len() == 2) {
+            // A pair needs every member supported on its own, and to beat the best single.
+            let members_ok = cands[pair].effects.iter().all(|e| supported(&e.name));
+            if members_ok && scores[pair] < scores[single] - margin_of(&cands[pair]) {
                 chosen = pair;
             }
         }
@@ -1059,19 +1133,47 @@ pub fn calibrate(
         let pts: Vec<(f64, f64)> = prof.iter().map(|p| (p.0.ea, p.2)).collect();
         let (ea, lo, hi) = profile_interval_noisy(&pts, j_eff, level, null_spread * j_eff / j_n);
         let (pb, sb, _) = best_point(&prof);
+        // A path stage alone changes no element of the gearbox: the table represents the
+        // model exactly once the record is de-coloured by the fitted stage, so the wear is the
+        // table's posterior recomputed on the de-coloured record (the diagnosis's line
+        // features, which carry the wear far better than a fit of the whole grid: on the
+        // tuning seeds the profile moved a good table estimate by 0.03–0.1).
+        let decoloured = match (&ch.effects[..], sb.resonance) {
+            ([e], Some(h)) if e.name == PATH_RESONANCE => {
+                let hz = Resonance {
+                    rho: h.rho * f1,
+                    ..h
+                };
+                let x = held::decolour_with(&record.samples, fs, &hz)?;
+                let rec = Record {
+                    samples: x,
+                    sample_rate: fs,
+                };
+                diagnose(&rec, table, &opts.diagnose)
+                    .ok()
+                    .map(|dd| WearEstimate {
+                        ea: dd.wear_degree.estimate,
+                        ea_lower: dd.wear_degree.lower,
+                        ea_upper: dd.wear_degree.upper,
+                        planetary: pb.planetary,
+                        method: "table-posterior-decoloured",
+                    })
+            }
+            _ => None,
+        };
         let fa = sensor_model(&sim.spectrum(&pb)?, &r, &sb);
         let mut effects = element_effects(&pb, baseline_planetary, &gears, &input);
         if let Some(res) = sb.resonance {
             effects.push(effect_resonance(&res, f1));
         }
         (rms_distance(&m, &fa) <= error_before).then_some((
-            WearEstimate {
+            decoloured.unwrap_or(WearEstimate {
                 ea,
                 ea_lower: lo,
                 ea_upper: hi,
                 planetary: pb.planetary,
                 method: "profile-likelihood",
-            },
+            }),
             sb,
             fa,
             effects,
