@@ -108,6 +108,9 @@ struct Row {
     /// signal, kurtosis of the record.
     fm4: f64,
     kurtosis: f64,
+    /// FM4 of each shaft's TSA difference signal (the diagnosis's order analysis, where the
+    /// record holds enough revolutions).
+    tsa_fm4: Vec<(String, f64)>,
 }
 
 fn std_diff(a: &[f64], b: &[f64]) -> f64 {
@@ -265,17 +268,30 @@ fn main() {
                         std_diff(&m, &ls(&other.samples)?),
                     )
                 };
-                let ci = gearwear::diagnosis::diagnose(&rec, &table, &Default::default())
+                let diag = gearwear::diagnosis::diagnose(&rec, &table, &Default::default()).ok();
+                let ci = diag
+                    .as_ref()
                     .map(|d| (d.condition_indicators.fm4, d.condition_indicators.kurtosis))
                     .unwrap_or((f64::NAN, f64::NAN));
+                let tsa_fm4: Vec<(String, f64)> = diag
+                    .as_ref()
+                    .and_then(|d| d.order.as_ref())
+                    .map(|o| {
+                        o.shafts
+                            .iter()
+                            .map(|s| (s.shaft.clone(), s.metrics.fm4.unwrap_or(f64::NAN)))
+                            .collect()
+                    })
+                    .unwrap_or_default();
                 if std::env::var("CL_INDICATORS_ONLY").is_ok() {
                     return Err(format!(
-                        "indicators only: fm4 {:.3} kurtosis {:.3} tooth {:?} wander {:?} visible {}",
+                        "indicators only: fm4 {:.3} kurtosis {:.3} tooth {:?} wander {:?} visible {} tsa {:?}",
                         ci.0,
                         ci.1,
                         e.tooth,
                         e.speed_wander,
-                        v_effect > v_noise
+                        v_effect > v_noise,
+                        tsa_fm4
                     ));
                 }
                 let mut copts = CalibrateOptions::default();
@@ -334,6 +350,7 @@ fn main() {
                         .collect(),
                     fm4: ci.0,
                     kurtosis: ci.1,
+                    tsa_fm4,
                 })
             };
             let mut row = run().unwrap_or_else(|err| Row {
@@ -367,6 +384,7 @@ fn main() {
                 candidates: vec![],
                 fm4: f64::NAN,
                 kurtosis: f64::NAN,
+                tsa_fm4: vec![],
             });
             row.seconds = t.elapsed().as_secs_f64();
             eprintln!(
