@@ -55,14 +55,15 @@ fn rss_kb(pid: &str) -> Option<(u64, u64)> {
 
 /// User + system CPU seconds of a process (`/proc/PID/stat`, fields 14 and 15, in clock ticks
 /// of 1/100 s — the kernel's USER_HZ on Linux).
-fn cpu_seconds(pid: &str) -> Option<f64> {
+/// CPU seconds of a process: (user, kernel), from `/proc/PID/stat` (clock ticks of 10 ms).
+fn cpu_seconds(pid: &str) -> Option<(f64, f64)> {
     let s = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
     // The command name (field 2) is in parentheses and may contain spaces.
     let rest = &s[s.rfind(')')? + 2..];
     let f: Vec<&str> = rest.split_whitespace().collect();
     let ut: f64 = f.get(11)?.parse().ok()?;
     let st: f64 = f.get(12)?.parse().ok()?;
-    Some((ut + st) / 100.0)
+    Some((ut / 100.0, st / 100.0))
 }
 
 fn percentile(sorted: &[f64], p: f64) -> f64 {
@@ -272,18 +273,19 @@ async fn main() {
         percentile(&lat, 1.0),
     );
     println!("latency ms: p50 {p50:.2}, p90 {p90:.2}, p99 {p99:.2}, max {max:.2}");
-    let server_cpu = match (cpu0, cpu_seconds(&pid)) {
-        (Some(a), Some(b)) if n > 0 => (b - a) / n as f64 * 1e3,
-        _ => f64::NAN,
+    let per_record = |a: Option<(f64, f64)>, b: Option<(f64, f64)>| match (a, b) {
+        (Some(a), Some(b)) if n > 0 => ((b.0 - a.0) / n as f64 * 1e3, (b.1 - a.1) / n as f64 * 1e3),
+        _ => (f64::NAN, f64::NAN),
     };
-    let client_cpu = match (self_cpu0, cpu_seconds("self")) {
-        (Some(a), Some(b)) if n > 0 => (b - a) / n as f64 * 1e3,
-        _ => f64::NAN,
-    };
+    let (server_user, server_kernel) = per_record(cpu0, cpu_seconds(&pid));
+    let server_cpu = server_user + server_kernel;
+    let (client_user, client_kernel) = per_record(self_cpu0, cpu_seconds("self"));
+    let client_cpu = client_user + client_kernel;
     let rss1 = rss_kb(&pid);
     if !pid.is_empty() {
         println!(
-            "server CPU per record {server_cpu:.2} ms, load generator CPU per record {client_cpu:.2} ms; \
+            "server CPU per record {server_cpu:.2} ms (user {server_user:.2}, kernel {server_kernel:.2}), \
+             load generator CPU per record {client_cpu:.2} ms; \
              server RSS start {:.1} MB, end {:.1} MB, peak {:.1} MB",
             rss0.map_or(f64::NAN, |r| r.0 as f64 / 1024.0),
             rss1.map_or(f64::NAN, |r| r.0 as f64 / 1024.0),
@@ -297,6 +299,7 @@ async fn main() {
             "seconds": wall, "records_per_second": n as f64 / wall,
             "p50_ms": p50, "p90_ms": p90, "p99_ms": p99, "max_ms": max,
             "server_cpu_ms_per_record": server_cpu, "client_cpu_ms_per_record": client_cpu,
+            "server_user_ms_per_record": server_user, "server_kernel_ms_per_record": server_kernel,
             "rss_start_kb": rss0.map(|r| r.0), "rss_end_kb": rss1.map(|r| r.0), "rss_peak_kb": rss1.map(|r| r.1),
             "format": format, "rate": rate, "concurrency": conc,
         })

@@ -6,7 +6,7 @@
 #           diagnosis's usual path;
 #   four  — loadgen's built-in four-sine record: a poor fit (χ²/feature ≈ 87), which makes the
 #           diagnosis try every f1 candidate — its slowest path.
-# One line per case: records/s, p50/p99 latency, server CPU per record, errors, RSS.
+# One line per case: records/s, p50/p99 latency, server CPU per record (user and kernel), errors, RSS.
 #
 #   scripts/service_bench.sh [BINARY] [LABEL]      # default: target/release/gearwear, "this"
 #
@@ -59,7 +59,8 @@ for rec in ${BENCH_RECORDS:-model four}; do
 import json, os
 s = json.load(open('$d/run.json'))
 line = (f\"$label $rec {s['format']:4} {s['records_per_second']:6.1f} rec/s  p50 {s['p50_ms']:5.1f} ms  p99 {s['p99_ms']:5.1f} ms  \"
-        f\"server CPU {s['server_cpu_ms_per_record']:5.2f} ms/record  errors {s['errors']}  \"
+        f\"server CPU {s['server_cpu_ms_per_record']:5.2f} ms/record \"
+        f\"(user {s.get('server_user_ms_per_record', float('nan')):.2f}, kernel {s.get('server_kernel_ms_per_record', float('nan')):.2f})  errors {s['errors']}  \"
         f\"RSS end {s['rss_end_kb']/1024:.1f} MB (peak {s['rss_peak_kb']/1024:.1f})\")
 if os.path.exists(os.environ['STAT']) and s['records']:
     ev = {}
