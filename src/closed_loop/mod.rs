@@ -1044,15 +1044,17 @@ pub fn calibrate(
                         .collect();
                     near(&sb, &mut mask)
                 }
-                TOOTH_DAMAGE if s > 0.0 => {
+                TOOTH_DAMAGE => {
                     // A pulse one mesh period long, once a revolution: shaft-order sidebands
                     // of about equal size out to ± z/2 orders around every mesh harmonic,
                     // i.e. the shaft's whole order comb m s over the band (for a gear of many
-                    // teeth that is every grid point: then only the score and the error
-                    // decide).
-                    let top = (r[r.len() - 1] / s).ceil() as usize;
-                    let comb: Vec<f64> = (1..=top).map(|k| k as f64 * s).collect();
-                    near(&comb, &mut mask);
+                    // teeth that is every grid point: then only the score, the error and the
+                    // TSA test decide).
+                    if s > 0.0 {
+                        let top = (r[r.len() - 1] / s).ceil() as usize;
+                        let comb: Vec<f64> = (1..=top).map(|k| k as f64 * s).collect();
+                        near(&comb, &mut mask);
+                    }
                 }
                 _ => near(&fam_wide, &mut mask),
             }
