@@ -4,7 +4,11 @@
 //! `cargo bench --bench closed_loop` (env: `CL_N` records, default 110 (22 min on the shared 2-core machine); `CL_SEED` base seed,
 //! default 2 — seed 1 is the one thresholds may be looked at on, report on another; `CL_OUT`
 //! JSON rows; `CL_KINDS` a comma list to run only some kinds; `CL_NULL_Z`, `CL_MARGIN` override
-//! `CalibrateOptions::null_z` and `bic_margin`, for tuning on seed 1 only).
+//! `CalibrateOptions::null_z` and `bic_margin`, for tuning on seed 1 only; `CL_INDICATORS_ONLY=1`
+//! skips the closed loop and stores, as each row's `error` text, the record's tacho-less FM4
+//! and kurtosis, the drawn tooth damage and speed wander, visibility and each shaft's TSA FM4 —
+//! every row then counts as failed in the report). Rows carry `fm4`, `kurtosis` and `tsa_fm4`
+//! (the diagnosis's condition indicators and per-shaft TSA FM4) besides the closed loop's answer.
 //!
 //! Every record: ea ~ U[0.1, 1], Ω1 ~ U over the table's band, gain log-uniform 1e-2 … 1e2,
 //! white noise at SNR ~ U[20, 30] dB, 16 kHz, 0.6 s, random initial state. Kinds cycle in a fixed
