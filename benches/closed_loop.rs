@@ -96,6 +96,12 @@ struct Row {
     ea_upper: f64,
     ea_before_lower: f64,
     ea_before_upper: f64,
+    /// The refit's own profile-likelihood estimate `(ea, lower, upper)` (`wear_profile`;
+    /// `None`: nothing claimed) and `wear_after`'s method.
+    ea_profile: Option<(f64, f64, f64)>,
+    /// The refit `wear_after` was decided from (`wear_refit`: `(ea, lower, upper)`).
+    ea_refit: Option<(f64, f64, f64)>,
+    method: String,
     /// Fitted resonance frequency over the truth (resonance records with the effect named).
     rho_ratio: Option<f64>,
     zeta_ratio: Option<f64>,
@@ -332,6 +338,9 @@ fn main() {
                     ea_upper: rep.wear_after.ea_upper,
                     ea_before_lower: rep.wear_before.ea_lower,
                     ea_before_upper: rep.wear_before.ea_upper,
+                    ea_profile: rep.wear_profile.map(|w| (w.ea, w.ea_lower, w.ea_upper)),
+                    ea_refit: rep.wear_refit.map(|w| (w.ea, w.ea_lower, w.ea_upper)),
+                    method: rep.wear_after.method.into(),
                     rho_ratio,
                     zeta_ratio,
                     seconds: 0.0,
@@ -378,6 +387,9 @@ fn main() {
                 ea_upper: f64::NAN,
                 ea_before_lower: f64::NAN,
                 ea_before_upper: f64::NAN,
+                ea_profile: None,
+                ea_refit: None,
+                method: String::new(),
                 rho_ratio: None,
                 zeta_ratio: None,
                 seconds: 0.0,

@@ -365,6 +365,25 @@ impl Matcher {
         })
     }
 
+    /// This matcher with the variance of every feature `d` raised by `extra[d]` at every
+    /// entry (same length as the features; non-finite or negative values count as 0): a
+    /// feature known less well than the table says — one an effect outside the table changes
+    /// by an uncertain amount ([`diagnose_shifted`]) — weighs less in the likelihood.
+    pub fn with_extra_variance(&self, extra: &[f64]) -> Matcher {
+        let add = |d: usize| extra.get(d).copied().filter(|v| *v > 0.0).unwrap_or(0.0);
+        let mut m = self.clone();
+        for v in m.var.iter_mut() {
+            for (d, x) in v.iter_mut().enumerate() {
+                *x += add(d);
+            }
+        }
+        let nw = m.wear_features.len();
+        for (i, x) in m.wear_var.iter_mut().enumerate() {
+            *x += add(m.wear_features[i % nw]);
+        }
+        m
+    }
+
     /// Clip a measured feature vector at the floor.
     pub fn clip(&self, y: &[f64]) -> Vec<f64> {
         y.iter().map(|v| v.max(self.floor)).collect()
@@ -942,7 +961,51 @@ pub fn diagnose_with_spectrum(
     matcher: &Matcher,
     opts: &DiagnoseOptions,
 ) -> Result<(Diagnosis, Option<Spectrum>)> {
-    let inp = Inputs::new(record, table)?;
+    diagnose_inner(Inputs::new(record, table)?, matcher, opts)
+}
+
+/// [`diagnose`] with known effects the table does not hold **held fixed**: `shift[k]` (the
+/// change those effects make to unclipped feature `k` of [`LineMeasurement::features`], same
+/// order and length) is subtracted from the record's features before they are clipped and
+/// matched, and `shift_var[k]` (that change's own uncertainty, ln-units²) is added to the
+/// feature's variance at every table entry ([`Matcher::with_extra_variance`]), so the posterior
+/// over `(ea, Ω1)` reads the record as the table's model would make it without the effects,
+/// leaning on the features they barely touch. The closed loop computes both from simulations
+/// with and without the effects it claimed (`closed_loop::calibrate`'s
+/// `table-posterior-effects-held` wear).
+///
+/// Errors: those of [`diagnose`], and a shift or variance whose length is not the table's
+/// feature count or that holds a non-finite value.
+pub fn diagnose_shifted(
+    record: &Record,
+    table: &SignatureTable,
+    opts: &DiagnoseOptions,
+    shift: &[f64],
+    shift_var: &[f64],
+) -> Result<Diagnosis> {
+    let nf = table.features.lines.len();
+    for (what, v) in [("shift", shift), ("shift variance", shift_var)] {
+        if v.len() != nf || v.iter().any(|x| !x.is_finite()) {
+            return Err(Error::Signal(format!(
+                "feature {what}: {} values (need {nf}, all finite)",
+                v.len()
+            )));
+        }
+    }
+    let matcher = Matcher::new(table, opts)?.with_extra_variance(shift_var);
+    let inp = Inputs {
+        shift: Some(shift),
+        ..Inputs::new(record, table)?
+    };
+    diagnose_inner(inp, &matcher, opts).map(|(d, _)| d)
+}
+
+fn diagnose_inner(
+    inp: Inputs<'_>,
+    matcher: &Matcher,
+    opts: &DiagnoseOptions,
+) -> Result<(Diagnosis, Option<Spectrum>)> {
+    let table = inp.table;
     let nominal = inp.nominal_f1(opts.shaft_hz)?;
     let mut warnings = Vec::new();
     let (mut f1, mut detection, spectrum) = inp.locate(nominal, &mut warnings)?;
@@ -1017,6 +1080,9 @@ pub fn diagnose_with_spectrum(
 
 /// The record and the table's facts that the steps of [`diagnose_with_spectrum`] share.
 struct Inputs<'a> {
+    table: &'a SignatureTable,
+    /// Subtracted from the unclipped features before matching ([`diagnose_shifted`]).
+    shift: Option<&'a [f64]>,
     x: &'a [f64],
     fs: f64,
     gb: &'a Gearbox,
@@ -1054,6 +1120,8 @@ impl<'a> Inputs<'a> {
         let (olo, ohi) = table.omega_band();
         let ratios = line_ratios(lines);
         Ok(Inputs {
+            table,
+            shift: None,
             x,
             fs,
             gb,
@@ -1192,7 +1260,11 @@ impl<'a> Inputs<'a> {
     /// `(ea, Ω1)` and the χ² at its mode.
     fn evaluate(&self, matcher: &Matcher, opts: &DiagnoseOptions, f1: f64) -> Result<Evaluation> {
         let meas = measure_lines(self.x, self.fs, f1, &self.ratios)?;
-        let y = matcher.clip(&meas.features(self.lines));
+        let mut raw = meas.features(self.lines);
+        if let Some(shift) = self.shift {
+            raw.iter_mut().zip(shift).for_each(|(v, d)| *v -= d);
+        }
+        let y = matcher.clip(&raw);
         let post = posterior(matcher, &y, f1 / self.f_ref, opts);
         let (chi2, _) = matcher.chi2(&y, post.mode(), post.omega_mean, opts);
         Ok(Evaluation {

@@ -156,17 +156,33 @@ fn refit_wear_is_continuous_with_a_real_interval() {
         2001,
         40.0,
     );
-    let w = &r.wear_after;
-    assert_eq!(w.method, "profile-likelihood");
-    assert!(
-        w.ea_lower <= w.ea && w.ea <= w.ea_upper,
-        "interval [{}, {}] around {}",
-        w.ea_lower,
-        w.ea_upper,
-        w.ea
-    );
-    assert!(w.ea_upper - w.ea_lower > 0.005, "{w:?}");
-    assert!(w.ea_lower <= EA + 0.02 && EA - 0.02 <= w.ea_upper, "{w:?}");
+    // The refit (the table's posterior with the effect held fixed), the profile beside it,
+    // and the wear after: each continuous with a real interval around the truth.
+    let refit = r.wear_refit.expect("an effect is claimed: a refit");
+    assert_eq!(refit.method, "table-posterior-effects-held");
+    let profile = r.wear_profile.expect("an effect is claimed: a profile");
+    assert_eq!(profile.method, "profile-likelihood");
+    for w in [&r.wear_after, &refit, &profile] {
+        assert!(
+            w.ea_lower <= w.ea && w.ea <= w.ea_upper,
+            "interval [{}, {}] around {}",
+            w.ea_lower,
+            w.ea_upper,
+            w.ea
+        );
+        assert!(w.ea_upper - w.ea_lower > 0.005, "{w:?}");
+        assert!(w.ea_lower <= EA + 0.02 && EA - 0.02 <= w.ea_upper, "{w:?}");
+    }
+    // The wear after follows the rule: the refit when it leaves the table's interval, else the
+    // table's estimate, confirmed.
+    let b = &r.wear_before;
+    if (b.ea_lower..=b.ea_upper).contains(&refit.ea) {
+        assert_eq!(r.wear_after.method, "table-posterior-confirmed");
+        assert_eq!(r.wear_after.ea, b.ea);
+    } else {
+        assert_eq!(r.wear_after.method, refit.method);
+        assert_eq!(r.wear_after.ea, refit.ea);
+    }
 }
 
 #[test]
@@ -222,7 +238,12 @@ fn a_damaged_tooth_is_claimed_at_its_shaft() {
     let loss = tooth.parameters["stiffness_loss"];
     assert!((0.3..=0.9).contains(&loss), "stiffness loss {loss} for 0.6");
     assert!(r.error_after < r.error_before);
-    assert_eq!(r.wear_after.method, "profile-likelihood");
+    assert!(
+        ["table-posterior-effects-held", "table-posterior-confirmed"]
+            .contains(&r.wear_after.method),
+        "{:?}",
+        r.wear_after
+    );
 }
 
 #[test]
@@ -245,4 +266,58 @@ fn mains_hum_is_unexplained_and_called_electrical_pickup() {
         "{:?}",
         r.unexplained
     );
+}
+
+/// The held-fixed posterior's arithmetic ([`diagnose_shifted`]): no shift and no extra variance
+/// is the plain diagnosis bit for bit; a shift of (table mean at 0.3 − table mean at 0.8) makes
+/// a clean 0.3 record read like the table's 0.8 (the features are *reduced* by the shift — a
+/// sign error would push the estimate the other way, to the grid's low end); a huge extra
+/// variance on every feature leaves a wide posterior.
+#[test]
+fn a_feature_shift_moves_the_table_posterior_the_right_way() {
+    use gearwear::diagnosis::{DiagnoseOptions, Matcher, diagnose, diagnose_shifted};
+    let table = SignatureTable::load(std::path::Path::new(DEFAULT_TABLE_PATH)).unwrap();
+    let spec = RigSpec {
+        ea: EA,
+        omega1: 1.0,
+        sample_rate: 16000.0,
+        duration: 0.6,
+        gain: 1.0,
+        snr_db: 30.0,
+        seed: 2010,
+        effects: RigEffects::default(),
+    };
+    let rec = generate(table.gearbox(), &spec).unwrap();
+    let opts = DiagnoseOptions::default();
+    let plain = diagnose(&rec, &table, &opts).unwrap();
+    let nf = table.features.lines.len();
+    let zero = vec![0.0; nf];
+    let same = diagnose_shifted(&rec, &table, &opts, &zero, &zero).unwrap();
+    assert_eq!(same.wear_degree.estimate, plain.wear_degree.estimate);
+    assert_eq!(same.wear_degree.lower, plain.wear_degree.lower);
+    assert_eq!(same.wear_degree.upper, plain.wear_degree.upper);
+
+    let m = Matcher::new(&table, &opts).unwrap();
+    let om = plain.omega1;
+    let shift: Vec<f64> = (0..nf)
+        .map(|d| m.stats_at(d, EA, om).0 - m.stats_at(d, 0.8, om).0)
+        .collect();
+    let moved = diagnose_shifted(&rec, &table, &opts, &shift, &zero).unwrap();
+    assert!(
+        (moved.wear_degree.estimate - 0.8).abs() < 0.1,
+        "shifted estimate {} (plain {})",
+        moved.wear_degree.estimate,
+        plain.wear_degree.estimate
+    );
+
+    let vague = diagnose_shifted(&rec, &table, &opts, &zero, &vec![100.0; nf]).unwrap();
+    let width = |d: &gearwear::diagnosis::Diagnosis| d.wear_degree.upper - d.wear_degree.lower;
+    assert!(
+        width(&vague) > 2.0 * width(&plain),
+        "{} vs {}",
+        width(&vague),
+        width(&plain)
+    );
+    // A shift of the wrong length is refused, not truncated.
+    assert!(diagnose_shifted(&rec, &table, &opts, &zero[1..], &zero).is_err());
 }

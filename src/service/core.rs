@@ -144,6 +144,9 @@ impl TableDiagnoser {
                 }
             }
         };
+        let wd = &d.wear_degree;
+        let moved = held_refit
+            .filter(|r| held.has_element_effect() && !(wd.lower..=wd.upper).contains(&r.ea));
         Ok((
             json!({
                 "id": cal.id,
@@ -153,16 +156,14 @@ impl TableDiagnoser {
                 "uncorrected_wear_degree": uncorrected,
                 "wear_refit": refit,
                 // Element effects are not in the signature table: the machine's wear (and so
-                // its alert level) is the refit's; a path stage alone is in the de-coloured
+                // its alert level) is the refit's when it lies outside the table's credible
+                // interval (inside it, the table's reading stands, as in the calibration's
+                // `table-posterior-confirmed`); a path stage alone is in the de-coloured
                 // `wear_degree`.
-                "alert_follows": if held.has_element_effect() && held_refit.is_some() {
-                    "wear_refit"
-                } else {
-                    "wear_degree"
-                },
+                "alert_follows": if moved.is_some() { "wear_refit" } else { "wear_degree" },
             }),
             warnings,
-            held_refit.filter(|_| held.has_element_effect()),
+            moved,
         ))
     }
 }

@@ -150,13 +150,23 @@ async fn calibrate_keep_use_and_clear(b: Backend) {
         "refit {ea_refit} not closer to {EA} than the table's {ea_table}"
     );
     // An element effect is held: the refit is continuous with an interval, and the alert level
-    // follows it.
+    // follows it when it lies outside the table's credible interval (inside, the table's
+    // reading stands).
     let (lo, hi) = (
         refit["ea_lower"].as_f64().unwrap(),
         refit["ea_upper"].as_f64().unwrap(),
     );
     assert!(lo <= ea_refit && ea_refit <= hi && hi > lo, "{refit}");
-    assert_eq!(c["alert_follows"], "wear_refit");
+    let (t_lo, t_hi) = (
+        d["wear_degree"]["lower"].as_f64().unwrap(),
+        d["wear_degree"]["upper"].as_f64().unwrap(),
+    );
+    let outside = !(t_lo..=t_hi).contains(&ea_refit);
+    assert_eq!(
+        c["alert_follows"],
+        if outside { "wear_refit" } else { "wear_degree" },
+        "refit {ea_refit} against the table's [{t_lo}, {t_hi}]"
+    );
     // Stored with the diagnosis too.
     let id = d["id"].as_str().unwrap();
     let r = app.get(&format!("/v1/diagnoses/{id}")).await;
