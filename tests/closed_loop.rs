@@ -17,20 +17,31 @@ fn run(effects: RigEffects, seed: u64, gain: f64) -> CalibrationReport {
 /// `run` with the input-shaft rate given (Ω1 = 1 is 30 Hz on the paper's rig).
 fn run_with(effects: RigEffects, seed: u64, gain: f64, shaft_hz: Option<f64>) -> CalibrationReport {
     let table = SignatureTable::load(std::path::Path::new(DEFAULT_TABLE_PATH)).unwrap();
+    let rec = rig_record(&table, effects, seed, gain, 20.0);
+    let mut opts = CalibrateOptions::default();
+    opts.diagnose.shaft_hz = shaft_hz;
+    calibrate(&rec, &table, &opts).unwrap()
+}
+
+/// A virtual-rig record at wear [`EA`], Ω1 = 1, 16 kHz, 0.6 s.
+fn rig_record(
+    table: &SignatureTable,
+    effects: RigEffects,
+    seed: u64,
+    gain: f64,
+    snr_db: f64,
+) -> gearwear::record::Record {
     let spec = RigSpec {
         ea: EA,
         omega1: 1.0,
         sample_rate: 16000.0,
         duration: 0.6,
         gain,
-        snr_db: 20.0,
+        snr_db,
         seed,
         effects,
     };
-    let rec = generate(table.gearbox(), &spec).unwrap();
-    let mut opts = CalibrateOptions::default();
-    opts.diagnose.shaft_hz = shaft_hz;
-    calibrate(&rec, &table, &opts).unwrap()
+    generate(table.gearbox(), &spec).unwrap()
 }
 
 fn names(r: &CalibrationReport) -> Vec<&str> {
@@ -277,17 +288,7 @@ fn mains_hum_is_unexplained_and_called_electrical_pickup() {
 fn a_feature_shift_moves_the_table_posterior_the_right_way() {
     use gearwear::diagnosis::{DiagnoseOptions, Matcher, diagnose, diagnose_shifted};
     let table = SignatureTable::load(std::path::Path::new(DEFAULT_TABLE_PATH)).unwrap();
-    let spec = RigSpec {
-        ea: EA,
-        omega1: 1.0,
-        sample_rate: 16000.0,
-        duration: 0.6,
-        gain: 1.0,
-        snr_db: 30.0,
-        seed: 2010,
-        effects: RigEffects::default(),
-    };
-    let rec = generate(table.gearbox(), &spec).unwrap();
+    let rec = rig_record(&table, RigEffects::default(), 2010, 1.0, 30.0);
     let opts = DiagnoseOptions::default();
     let plain = diagnose(&rec, &table, &opts).unwrap();
     let nf = table.features.lines.len();

@@ -323,6 +323,20 @@ impl Simulator<'_> {
         }
     }
 
+    /// The first `n` initial-state seeds: the loop's own, then the model seeds derived from it
+    /// (the model's scatter and the held refit's shift use the same ones).
+    fn seeds(&self, n: u64) -> Vec<u64> {
+        (0..n)
+            .map(|k| {
+                if k == 0 {
+                    self.seed
+                } else {
+                    mix_seed(&[self.seed, k, 0x5EED])
+                }
+            })
+            .collect()
+    }
+
     /// Model spectrum (dB, dimensionless ẍ̄1) on the grid.
     fn spectrum(&self, p: &ElementParams) -> Result<Vec<f64>> {
         self.spectrum_seeded(p, self.seed)
@@ -623,15 +637,7 @@ fn model_scatter(
 ) -> Result<Scatter> {
     let n = r.len();
     let unit = Weights::unit(n);
-    let seeds: Vec<u64> = (0..=extra as u64)
-        .map(|k| {
-            if k == 0 {
-                sim.seed
-            } else {
-                mix_seed(&[sim.seed, k, 0x5EED])
-            }
-        })
-        .collect();
+    let seeds = sim.seeds(extra as u64 + 1);
     let spectra: Vec<Vec<f64>> = seeds
         .par_iter()
         .map(|&sd| sim.spectrum_seeded(&p, sd))
@@ -1387,15 +1393,7 @@ fn table_posterior_held(
     };
     let (d, method) = if has_element {
         let lines = &table.features.lines;
-        let seeds: Vec<u64> = (0..HELD_SHIFT_SEEDS)
-            .map(|k| {
-                if k == 0 {
-                    sim.seed
-                } else {
-                    mix_seed(&[sim.seed, k, 0x5EED])
-                }
-            })
-            .collect();
+        let seeds = sim.seeds(HELD_SHIFT_SEEDS);
         let with = ElementParams { ea: ea_at, ..pb };
         let without = ElementParams::plain(ea_at, baseline_planetary);
         let yw = sim.line_features(&with, &seeds, lines)?;
