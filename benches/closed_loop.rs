@@ -6,9 +6,12 @@
 //! JSON rows; `CL_KINDS` a comma list to run only some kinds; `CL_NULL_Z`, `CL_MARGIN` override
 //! `CalibrateOptions::null_z` and `bic_margin`, for tuning on seed 1 only; `CL_INDICATORS_ONLY=1`
 //! skips the closed loop and stores, as each row's `error` text, the record's tacho-less FM4
-//! and kurtosis, the drawn tooth damage and speed wander, visibility and each shaft's TSA FM4 —
-//! every row then counts as failed in the report). Rows carry `fm4`, `kurtosis` and `tsa_fm4`
-//! (the diagnosis's condition indicators and per-shaft TSA FM4) besides the closed loop's answer.
+//! and kurtosis, the drawn tooth damage and speed wander, visibility, each shaft's TSA FM4 and
+//! the tracked speed's relative standard deviation — every row then counts as failed in the
+//! report). Rows carry `fm4`, `kurtosis`, `tsa_fm4` and `speed_std` (the diagnosis's condition
+//! indicators, per-shaft TSA FM4 and its order tracking's speed spread) besides the closed
+//! loop's answer, and `ea_refit`, `ea_profile`, `method` (the wear refit, the profile's vertex,
+//! `wear_after`'s method).
 //!
 //! Every record: ea ~ U[0.1, 1], Ω1 ~ U over the table's band, gain log-uniform 1e-2 … 1e2,
 //! white noise at SNR ~ U[20, 30] dB, 16 kHz, 0.6 s, random initial state. Kinds cycle in a fixed
@@ -121,6 +124,9 @@ struct Row {
     /// FM4 of each shaft's TSA difference signal (the diagnosis's order analysis, where the
     /// record holds enough revolutions).
     tsa_fm4: Vec<(String, f64)>,
+    /// Standard deviation / mean of the per-revolution shaft rate from the diagnosis's order
+    /// tracking (NaN without one): the speed variation a constant-speed model cannot make.
+    speed_std: f64,
 }
 
 fn std_diff(a: &[f64], b: &[f64]) -> f64 {
@@ -293,15 +299,20 @@ fn main() {
                             .collect()
                     })
                     .unwrap_or_default();
+                let speed_std = diag
+                    .as_ref()
+                    .and_then(|d| d.order.as_ref())
+                    .map_or(f64::NAN, |o| o.tracking.speed_std);
                 if std::env::var("CL_INDICATORS_ONLY").is_ok() {
                     return Err(format!(
-                        "indicators only: fm4 {:.3} kurtosis {:.3} tooth {:?} wander {:?} visible {} tsa {:?}",
+                        "indicators only: fm4 {:.3} kurtosis {:.3} tooth {:?} wander {:?} visible {} tsa {:?} speed_std {:.6}",
                         ci.0,
                         ci.1,
                         e.tooth,
                         e.speed_wander,
                         v_effect > v_noise,
-                        tsa_fm4
+                        tsa_fm4,
+                        speed_std
                     ));
                 }
                 let mut copts = CalibrateOptions::default();
@@ -364,6 +375,7 @@ fn main() {
                     fm4: ci.0,
                     kurtosis: ci.1,
                     tsa_fm4,
+                    speed_std,
                 })
             };
             let mut row = run().unwrap_or_else(|err| Row {
@@ -401,6 +413,7 @@ fn main() {
                 fm4: f64::NAN,
                 kurtosis: f64::NAN,
                 tsa_fm4: vec![],
+                speed_std: f64::NAN,
             });
             row.seconds = t.elapsed().as_secs_f64();
             eprintln!(
