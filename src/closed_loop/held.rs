@@ -98,6 +98,14 @@ impl HeldEffects {
     }
 }
 
+/// Whether a wear refit with element effects held moves the machine's wear: only when its
+/// `ea` lies outside the table's credible interval `(lower, upper)`; inside it the table's
+/// reading stands. One rule for the calibration's `wear_after`
+/// (`table-posterior-confirmed`) and the service's alert level (`alert_follows`).
+pub fn refit_moves_wear((lower, upper): (f64, f64), ea: f64) -> bool {
+    !(lower..=upper).contains(&ea)
+}
+
 /// Divide the spectrum of `x` (sample rate `fs`) by `|H(f)|` of a resonance at `fr_hz` with
 /// damping `zeta` (zero phase; the correction at each frequency clamped to
 /// ±[`MAX_CORRECTION_DB`]).

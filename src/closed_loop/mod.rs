@@ -1243,7 +1243,6 @@ pub fn calibrate(
                 &opts.diagnose,
                 ch,
                 (pb, sb.resonance),
-                pb.ea,
                 baseline_planetary,
                 f1,
             )?;
@@ -1252,8 +1251,9 @@ pub fn calibrate(
                 effects.push(effect_resonance(&res, f1));
             }
             let refit = held.unwrap_or(profile);
+            let element = ch.effects.iter().any(|e| e.name != PATH_RESONANCE);
             Some((
-                confirm_or_move(&wear_before, refit),
+                confirm_or_move(&wear_before, refit, element),
                 Some(refit),
                 Some(profile),
                 sb,
@@ -1317,7 +1317,7 @@ pub fn calibrate(
     })
 }
 
-/// The wear after a claim: the refit `refit`, unless it re-reads element effects (not a path
+/// The wear after a claim: the refit `refit`, unless it re-reads `element` effects (not a path
 /// stage alone) and lands inside the table's credible interval `[before.ea_lower,
 /// before.ea_upper]`; then the table's estimate and interval stand
 /// (`table-posterior-confirmed`). A de-coloured record is the record without a linear sensor
@@ -1327,9 +1327,8 @@ pub fn calibrate(
 /// `benches/closed_loop.rs`, 66 records: wear error after ≤ before on 54 taking every refit, 56
 /// taking the profile's vertex as session 8 did, 60 with this rule; fresh seeds in
 /// `docs/closed-loop.md` § Session 9). The refit is still reported (`wear_refit`).
-fn confirm_or_move(before: &WearEstimate, refit: WearEstimate) -> WearEstimate {
-    let element = refit.method != "table-posterior-decoloured";
-    if element && (before.ea_lower..=before.ea_upper).contains(&refit.ea) {
+fn confirm_or_move(before: &WearEstimate, refit: WearEstimate, element: bool) -> WearEstimate {
+    if element && !held::refit_moves_wear((before.ea_lower, before.ea_upper), refit.ea) {
         WearEstimate {
             planetary: refit.planetary,
             method: "table-posterior-confirmed",
@@ -1347,11 +1346,11 @@ const HELD_SHIFT_SEEDS: u64 = 4;
 /// The table's posterior with the chosen effects held fixed (`None` when that diagnosis
 /// fails; the caller then keeps the profile). A path stage in the set de-colours the record by
 /// the fitted `|H|` (Hz); element effects (shaft modulation, planetary wear, tooth damage)
-/// shift the record's line features by what they change in the model at `ea_at` (the chosen
-/// model's profile minimum: where the model with the effects fits the record; at the table's
+/// shift the record's line features by what they change in the model at `pb` (the chosen
+/// model's profile minimum, where the model with the effects fits the record; at the table's
 /// own estimate, which an effect biases, the shift was the wrong one — the eccentricity test
-/// read 0.47 for a truth of 0.3 that way, 0.30 this way): `Δy = ȳ(ea_at, effects) −
-/// ȳ(ea_at, none)`, each the mean over
+/// read 0.474 for a truth of 0.3 that way, 0.300 this way): `Δy = ȳ(pb) −
+/// ȳ(pb without its effects)`, each the mean over
 /// [`HELD_SHIFT_SEEDS`] initial states (the same seeds with and without, so the periodic
 /// regime's Δy is exact and the chaotic one's is a difference of long-run means). A feature is
 /// `ln(A_ℓ/A_f1)`, which a linear sensor stage shifts alike with and without the effects, so
@@ -1370,7 +1369,6 @@ fn table_posterior_held(
     dopts: &DiagnoseOptions,
     ch: &Fitted,
     (pb, resonance): (ElementParams, Option<Resonance>),
-    ea_at: f64,
     baseline_planetary: f64,
     f1: f64,
 ) -> Result<Option<WearEstimate>> {
@@ -1394,9 +1392,8 @@ fn table_posterior_held(
     let (d, method) = if has_element {
         let lines = &table.features.lines;
         let seeds = sim.seeds(HELD_SHIFT_SEEDS);
-        let with = ElementParams { ea: ea_at, ..pb };
-        let without = ElementParams::plain(ea_at, baseline_planetary);
-        let yw = sim.line_features(&with, &seeds, lines)?;
+        let without = ElementParams::plain(pb.ea, baseline_planetary);
+        let yw = sim.line_features(&pb, &seeds, lines)?;
         let y0 = sim.line_features(&without, &seeds, lines)?;
         // Paired differences (same seed with and without): their mean is the shift, their
         // standard error the simulations' part of its uncertainty; the fitted effect's own
@@ -1517,4 +1514,48 @@ pub fn refit_held(
         f1_hz: f1,
         omega1,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn est(ea: f64, lo: f64, hi: f64, method: &'static str) -> WearEstimate {
+        WearEstimate {
+            ea,
+            ea_lower: lo,
+            ea_upper: hi,
+            planetary: 0.1,
+            method,
+        }
+    }
+
+    #[test]
+    fn an_element_refit_moves_the_wear_only_outside_the_tables_interval() {
+        let before = est(0.50, 0.40, 0.53, "table-posterior");
+        // Inside: the table's estimate and interval stand, named as confirmed.
+        let inside = confirm_or_move(
+            &before,
+            est(0.45, 0.30, 0.60, "table-posterior-effects-held"),
+            true,
+        );
+        assert_eq!(inside.method, "table-posterior-confirmed");
+        assert_eq!(
+            (inside.ea, inside.ea_lower, inside.ea_upper),
+            (0.50, 0.40, 0.53)
+        );
+        // Outside (the eccentricity test's case): the refit is the wear.
+        let refit = est(0.30, 0.27, 0.51, "table-posterior-effects-held");
+        let outside = confirm_or_move(&before, refit, true);
+        assert_eq!((outside.ea, outside.method), (0.30, refit.method));
+        // A path stage alone is always taken, even inside, and whatever its method (the profile
+        // stands in when the de-coloured diagnosis fails).
+        for m in ["table-posterior-decoloured", "profile-likelihood"] {
+            let r = confirm_or_move(&before, est(0.45, 0.35, 0.55, m), false);
+            assert_eq!((r.ea, r.method), (0.45, m));
+        }
+        // The interval's ends count as inside.
+        assert!(!held::refit_moves_wear((0.40, 0.53), 0.40));
+        assert!(held::refit_moves_wear((0.40, 0.53), 0.5301));
+    }
 }

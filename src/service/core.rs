@@ -8,7 +8,7 @@ use anyhow::Context;
 use serde_json::json;
 
 use super::diagnoser::{Diagnoser, Input, MachineCalibration, Output};
-use crate::closed_loop::held::{HeldEffects, MAX_CORRECTION_DB};
+use crate::closed_loop::held::{HeldEffects, MAX_CORRECTION_DB, refit_moves_wear};
 use crate::closed_loop::{CalibrateOptions, HeldRefit, calibrate, refit_held};
 use crate::diagnosis::{DiagnoseOptions, Matcher, diagnose_with, diagnose_with_spectrum};
 use crate::gearbox::Gearbox;
@@ -146,7 +146,7 @@ impl TableDiagnoser {
         };
         let wd = &d.wear_degree;
         let moved = held_refit
-            .filter(|r| held.has_element_effect() && !(wd.lower..=wd.upper).contains(&r.ea));
+            .filter(|r| held.has_element_effect() && refit_moves_wear((wd.lower, wd.upper), r.ea));
         Ok((
             json!({
                 "id": cal.id,
