@@ -1236,12 +1236,14 @@ pub fn calibrate(
         if rms_distance(&m, &fa) > error_before {
             None
         } else {
+            let element = ch.effects.iter().any(|e| e.name != PATH_RESONANCE);
+            let path = ch.effects.iter().any(|e| e.name == PATH_RESONANCE);
             let held = table_posterior_held(
                 &sim,
                 record,
                 table,
                 &opts.diagnose,
-                ch,
+                (path, element),
                 (pb, sb.resonance),
                 baseline_planetary,
                 f1,
@@ -1251,7 +1253,6 @@ pub fn calibrate(
                 effects.push(effect_resonance(&res, f1));
             }
             let refit = held.unwrap_or(profile);
-            let element = ch.effects.iter().any(|e| e.name != PATH_RESONANCE);
             Some((
                 confirm_or_move(&wear_before, refit, element),
                 Some(refit),
@@ -1344,7 +1345,9 @@ fn confirm_or_move(before: &WearEstimate, refit: WearEstimate, element: bool) ->
 const HELD_SHIFT_SEEDS: u64 = 4;
 
 /// The table's posterior with the chosen effects held fixed (`None` when that diagnosis
-/// fails; the caller then keeps the profile). A path stage in the set de-colours the record by
+/// fails, or the set holds neither kind; the caller then keeps the profile). `has_path`,
+/// `has_element`: whether the chosen set holds a path stage, an element effect. A path stage
+/// in the set de-colours the record by
 /// the fitted `|H|` (Hz); element effects (shaft modulation, planetary wear, tooth damage)
 /// shift the record's line features by what they change in the model at `pb` (the chosen
 /// model's profile minimum, where the model with the effects fits the record; at the table's
@@ -1367,13 +1370,11 @@ fn table_posterior_held(
     record: &Record,
     table: &SignatureTable,
     dopts: &DiagnoseOptions,
-    ch: &Fitted,
+    (has_path, has_element): (bool, bool),
     (pb, resonance): (ElementParams, Option<Resonance>),
     baseline_planetary: f64,
     f1: f64,
 ) -> Result<Option<WearEstimate>> {
-    let has_path = ch.effects.iter().any(|e| e.name == PATH_RESONANCE);
-    let has_element = ch.effects.iter().any(|e| e.name != PATH_RESONANCE);
     let decoloured;
     let rec = match resonance {
         Some(h) if has_path => {
