@@ -41,6 +41,7 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 
 use gearwear::closed_loop::effects::reference_gears;
+use gearwear::closed_loop::sidebands::SidebandScan;
 use gearwear::closed_loop::spectrum::log_spectrum;
 use gearwear::closed_loop::virtual_rig::{RigEffects, RigSpec, generate};
 use gearwear::closed_loop::{CalibrateOptions, calibrate};
@@ -127,6 +128,15 @@ struct Row {
     /// Standard deviation / mean of the per-revolution shaft rate from the diagnosis's order
     /// tracking (NaN without one): the speed variation a constant-speed model cannot make.
     speed_std: f64,
+    /// Speed wander: its rate over f1 (the size is its depth).
+    wander_rate: Option<f64>,
+    /// Shaft modulation / tooth damage: the rate over f1 of the shaft the rig put it on.
+    truth_shaft: Option<f64>,
+    /// The claimed shaft modulation's / tooth damage's shaft rate over f1.
+    named_shaft: Option<f64>,
+    /// The report's sideband checks: (shaft, spacing over f1, prominence dB, off the rate,
+    /// prominence of the sidebands at the shaft's rate dB).
+    sidebands: Vec<(String, f64, f64, bool, f64)>,
 }
 
 fn std_diff(a: &[f64], b: &[f64]) -> f64 {
@@ -152,7 +162,14 @@ fn main() {
     let gears = reference_gears(&gb);
     let f_ref = gb.reference_frequency_hz();
     let t_all = Instant::now();
+    // `CL_INDICES=3,17`: only these records of the set (for looking at single records).
+    let indices: Vec<usize> = env("CL_INDICES", String::new())
+        .split(',')
+        .filter_map(|v| v.trim().parse().ok())
+        .collect();
     let rows: Vec<Row> = (0..n)
+        .filter(|i| indices.is_empty() || indices.contains(i))
+        .collect::<Vec<usize>>()
         .into_par_iter()
         .map(|i| {
             let kind = kinds[i % kinds.len()];
@@ -304,8 +321,25 @@ fn main() {
                     .and_then(|d| d.order.as_ref())
                     .map_or(f64::NAN, |o| o.tracking.speed_std);
                 if std::env::var("CL_INDICATORS_ONLY").is_ok() {
+                    let sb: Vec<String> = diag
+                        .as_ref()
+                        .and_then(|d| SidebandScan::new(&rec.samples, spec.sample_rate, d.f1_hz, 2.5))
+                        .map(|scan| {
+                            reference_gears(&gb)
+                                .iter()
+                                .filter_map(|g| scan.check(&g.shaft, g.shaft_ratio))
+                                .map(|c| {
+                                    format!(
+                                        "{} s {:.4} at {:.4} prom {:.1} dB shaft prom {:.1} off {}",
+                                        c.shaft, c.shaft_ratio, c.spacing_ratio, c.prominence_db,
+                                        c.shaft_prominence_db, c.off_rate
+                                    )
+                                })
+                                .collect()
+                        })
+                        .unwrap_or_default();
                     return Err(format!(
-                        "indicators only: fm4 {:.3} kurtosis {:.3} tooth {:?} wander {:?} visible {} tsa {:?} speed_std {:.6}",
+                        "indicators only: sidebands {sb:?} fm4 {:.3} kurtosis {:.3} tooth {:?} wander {:?} visible {} tsa {:?} speed_std {:.6}",
                         ci.0,
                         ci.1,
                         e.tooth,
@@ -376,6 +410,25 @@ fn main() {
                     kurtosis: ci.1,
                     tsa_fm4,
                     speed_std,
+                    wander_rate: e.speed_wander.map(|w| w.1),
+                    truth_shaft: e.eccentricity_shaft.or(e.tooth.map(|t| t.0)),
+                    named_shaft: rep
+                        .effects
+                        .iter()
+                        .find_map(|x| x.parameters.get("shaft_ratio").copied()),
+                    sidebands: rep
+                        .sideband_checks
+                        .iter()
+                        .map(|c| {
+                            (
+                                c.shaft.clone(),
+                                c.spacing_ratio,
+                                c.prominence_db,
+                                c.off_rate,
+                                c.shaft_prominence_db,
+                            )
+                        })
+                        .collect(),
                 })
             };
             let mut row = run().unwrap_or_else(|err| Row {
@@ -414,6 +467,10 @@ fn main() {
                 kurtosis: f64::NAN,
                 tsa_fm4: vec![],
                 speed_std: f64::NAN,
+                wander_rate: e.speed_wander.map(|w| w.1),
+                truth_shaft: e.eccentricity_shaft.or(e.tooth.map(|t| t.0)),
+                named_shaft: None,
+                sidebands: vec![],
             });
             row.seconds = t.elapsed().as_secs_f64();
             eprintln!(

@@ -322,3 +322,70 @@ fn a_feature_shift_moves_the_table_posterior_the_right_way() {
     // A shift of the wrong length is refused, not truncated.
     assert!(diagnose_shifted(&rec, &table, &opts, &zero[1..], &zero).is_err());
 }
+
+/// Speed wander at 0.024 f1 puts frequency-modulation sidebands around the mesh lines one grid
+/// step from where the input shaft's (1/29 ≈ 0.0345 f1) would be. At the record's own
+/// resolution (0.0018 f1 for 0.6 s) they are found where they are, the effects of that shaft
+/// are not claimed, and the extra lines are reported as a speed or load fluctuation.
+#[test]
+fn speed_wander_is_not_claimed_as_the_input_shafts_modulation() {
+    let r = run(
+        RigEffects {
+            speed_wander: Some((0.013, 0.024)),
+            ..Default::default()
+        },
+        2011,
+        1.0,
+    );
+    let input = r
+        .sideband_checks
+        .iter()
+        .find(|c| (c.shaft_ratio - 1.0 / 29.0).abs() < 1e-9)
+        .unwrap_or_else(|| panic!("no check of the input shaft: {:?}", r.sideband_checks));
+    assert!(input.off_rate, "{input:?}");
+    assert!(
+        (input.spacing_ratio - 0.024).abs() < input.resolution_ratio,
+        "{input:?}"
+    );
+    assert!(
+        !r.effects
+            .iter()
+            .any(|e| e.labels.get("shaft") == Some(&input.shaft)),
+        "claimed at the input shaft: {:?}",
+        r.effects
+    );
+    assert!(
+        r.unexplained.iter().any(|u| u.guess.contains("fluctuates")),
+        "{:?}",
+        r.unexplained
+    );
+}
+
+/// Modulation at the stage-1 gear's shaft (f1/100: its sidebands 1.3 grid steps from the
+/// carrier, inside its main lobe on the grid) is named at that shaft, with its amplitude scored
+/// over a grid rather than read off lines the grid cannot separate.
+#[test]
+fn a_slow_shafts_modulation_is_named_at_its_shaft() {
+    let table = SignatureTable::load(std::path::Path::new(DEFAULT_TABLE_PATH)).unwrap();
+    let gears = gearwear::closed_loop::effects::reference_gears(table.gearbox());
+    let gear = &gears[1];
+    assert!((gear.shaft_ratio - 0.01).abs() < 1e-9);
+    let r = run(
+        RigEffects {
+            eccentricity: Some(0.15),
+            eccentricity_shaft: Some(gear.shaft_ratio),
+            ..Default::default()
+        },
+        2012,
+        3.0,
+    );
+    let m = r
+        .effects
+        .iter()
+        .find(|e| e.name == "shaft-modulation")
+        .unwrap_or_else(|| panic!("not named: {:?}", r.candidates));
+    assert_eq!(m.labels.get("shaft"), Some(&gear.shaft), "{m:?}");
+    let a = m.parameters["sideband_amplitude_b"];
+    assert!((0.06..=0.4).contains(&a), "amplitude {a} for 0.15");
+    assert!(r.error_after < r.error_before);
+}

@@ -23,7 +23,8 @@
 //!    `BIC = J ln(Σρ/J) + k ln J` (J grid points).
 //! 6. **Selection**: only candidates whose improvement falls on their fingerprint
 //!    ([`SUPPORT_SHARE`], see [`Candidate::fingerprint_share`]) and that lower the plain RMS
-//!    error are eligible; the lowest BIC of the eligible single effects wins if it beats "no
+//!    error are eligible (an effect of a shaft whose rate the record's sidebands are not at,
+//!    measured at the record's own resolution, is not: [`sidebands`]); the lowest BIC of the eligible single effects wins if it beats "no
 //!    effect" by `bic_margin + null_z · null_spread` (`null_spread`: the standard deviation of
 //!    the plain model's deviance over the model seeds — what luck alone gives; times
 //!    [`TOOTH_MARGIN_FACTOR`] for tooth damage); a pair replaces
@@ -51,6 +52,7 @@ pub mod effects;
 pub mod fit;
 pub mod held;
 pub mod residual;
+pub mod sidebands;
 pub mod spectrum;
 pub mod virtual_rig;
 
@@ -79,6 +81,7 @@ use fit::{
     Weights, effective_points, fit_sensor, profile_interval_noisy, search_resonance, sensor_model,
 };
 use residual::{annotate, fingerprint_gap, residual_features};
+use sidebands::{SidebandCheck, SidebandScan, refuses};
 use spectrum::{grid, grid_index, log_spectrum, rms_distance, running_median};
 
 /// Tuning of [`calibrate`].
@@ -172,7 +175,8 @@ pub struct Candidate {
     pub fingerprint_share: f64,
     /// Whether it could be claimed: fingerprint share reached and the plain RMS error of the
     /// table's estimate lowered (and, for tooth damage, the damaged gear's TSA impulsive where
-    /// the record has one, see [`TOOTH_TSA_FM4`]).
+    /// the record has one, see [`TOOTH_TSA_FM4`]; for shaft modulation and tooth damage, the
+    /// record's sidebands not off the shaft's rate, see [`sidebands`]).
     pub eligible: bool,
     /// Tooth damage: FM4 of the damaged gear's shaft's TSA difference signal (the diagnosis's
     /// order analysis); absent when the record holds too few revolutions of that shaft.
@@ -208,6 +212,10 @@ pub const TOOTH_TSA_FM4: f64 = 5.0;
 
 /// Stiffness losses a damaged-tooth candidate is scored at (then refined between neighbours).
 const TOOTH_SCAN: [f64; 7] = [0.05, 0.1, 0.2, 0.35, 0.5, 0.7, 0.9];
+
+/// Shaft-modulation sideband amplitudes (units of b) a slow shaft's modulation is scored at
+/// (then refined between neighbours): the benchmark draws 0.0025–0.25.
+const MODULATION_SCAN: [f64; 8] = [0.005, 0.01, 0.02, 0.04, 0.08, 0.15, 0.3, 0.6];
 
 /// Planetary error amplitudes (units of b) a planetary-wear candidate is scored at (those
 /// above the gearbox's baseline; then refined between neighbours).
@@ -289,6 +297,9 @@ pub struct CalibrationReport {
     /// Smooth residual trend after: RMS of the running median (dB).
     pub trend_rms_db: f64,
     pub candidates: Vec<Candidate>,
+    /// Where the record's sidebands lie against each shaft an element effect was tried on
+    /// ([`sidebands`]; empty when the record is too short to tell).
+    pub sideband_checks: Vec<SidebandCheck>,
     pub spectra: Spectra,
     pub diagnosis_warnings: Vec<String>,
     pub options: CalibrateOptions,
@@ -834,6 +845,14 @@ pub fn calibrate(
             shafts.push(g.clone());
         }
     }
+    // Where the record's sidebands lie, at its own resolution ([`sidebands`]): an element
+    // effect of a shaft whose rate the sidebands are not at (shaft modulation: or without
+    // sidebands at that rate) is not eligible.
+    let scan = SidebandScan::new(&record.samples, fs, f1, spectrum::BAND_HI);
+    let sideband_checks: Vec<SidebandCheck> = shafts
+        .iter()
+        .filter_map(|g| scan.as_ref()?.check(&g.shaft, g.shaft_ratio))
+        .collect();
     let f3 = gb.planetary_ratio();
     let fam: Vec<f64> = f3
         .map(|f3| vec![f3, 2.0 * f3, 1.0 - f3, 1.0 + f3])
@@ -910,7 +929,14 @@ pub fn calibrate(
             ecc_shaft: s,
             ..b
         };
-        let p = element_fit(pn, &set, 0.05, &sb, 1e-3, 2.0)?;
+        // Sidebands within 3 grid steps of their carrier sit in its main lobe on the grid
+        // (a gear of many teeth: the stage-1 gear shaft at f1/100 is 1.3 steps out), where the
+        // gap at the sideband lines measures the carrier: the amplitude by score instead.
+        let p = if s * spectrum::GRID_PERIODS < 3.0 {
+            element_scan(pn, &set, &MODULATION_SCAN)?
+        } else {
+            element_fit(pn, &set, 0.05, &sb, 1e-3, 2.0)?
+        };
         singles.push((SHAFT_MODULATION.into(), p));
     }
     if f3.is_some() {
@@ -966,8 +992,17 @@ pub fn calibrate(
     }
     // Pairs: the best variant of each element effect with the resonance, and with each other.
     let n_single = cands.len();
+    // (A variant the record's sidebands refuse cannot be claimed: the pairs take the best of
+    // the others.)
     let mut best_variant: Vec<(String, ElementParams)> = Vec::new();
     for (k, (name, p)) in singles.iter().enumerate() {
+        let shaft = match name.as_str() {
+            SHAFT_MODULATION => p.ecc_shaft,
+            _ => p.tooth_shaft,
+        };
+        if refuses(&sideband_checks, name, shaft) {
+            continue;
+        }
         let rss = cands[n_single - singles.len() + k].rss;
         match best_variant.iter().position(|(n, _)| n == name) {
             Some(i) => {
@@ -1140,6 +1175,14 @@ pub fn calibrate(
         {
             support[ci] = support[ci].min(0.0);
         }
+        let refused = c.effects.iter().any(|e| {
+            e.parameters
+                .get("shaft_ratio")
+                .is_some_and(|&s| refuses(&sideband_checks, &e.name, s))
+        });
+        if refused {
+            support[ci] = support[ci].min(0.0);
+        }
     }
 
     // Selection: a BIC on the deviance of the weighted robust score, `J_eff ln(score/J) +
@@ -1276,7 +1319,7 @@ pub fn calibrate(
     let trend_rms_db = rms_distance(&trend, &vec![0.0; trend.len()]);
     let m_rel = rel(&m);
     let mut unexplained = residual_features(&res_after, &m_rel, &r, f1, opts.unexplained_db);
-    annotate(&mut unexplained, gb, f1);
+    annotate(&mut unexplained, gb, f1, &sideband_checks);
     let residual_features_before =
         residual_features(&res_before, &m_rel, &r, f1, opts.unexplained_db);
     if !(error_before.is_finite() && error_after.is_finite()) {
@@ -1304,6 +1347,7 @@ pub fn calibrate(
         sensor_after,
         trend_rms_db,
         candidates,
+        sideband_checks,
         spectra: Spectra {
             frequency_ratio: r.clone(),
             measured_db: m_rel.clone(),

@@ -4,19 +4,24 @@
 //! The guesses, in order (the first that applies):
 //! 1. **Mains pickup**: two or more `extra` lines within tolerance of odd multiples of 50 Hz
 //!    (or of 60 Hz), or one such line at 50/60/150/180 Hz: "electrical pickup".
-//! 2. **Harmonic of another extra line**: its frequency an integer multiple (2–6) of a
+//! 2. **Sidebands off every shaft's rate**: when the record's sidebands were measured off a
+//!    shaft's rate ([`super::sidebands`], spacing `δ`), an extra line within 0.75 grid step of
+//!    `a f1 ± n δ` (a = 1, 2; n = 1…3), unless `δ` lies within 0.75 record bin of 1–3 times a
+//!    shaft's rate: "the speed or the load fluctuates at δ f1 Hz".
+//! 3. **Harmonic of another extra line**: its frequency an integer multiple (2–6) of a
 //!    stronger extra line's.
-//! 3. **Broadband**: a run wider than 0.05 f1: "a raised band: broadband noise, impacts,
+//! 4. **Broadband**: a run wider than 0.05 f1: "a raised band: broadband noise, impacts,
 //!    bursts".
-//! 4. **Synchronous**: at `a f1 + n f_s` (a = 0, 1, 2; |n| ≤ 3; f_s the rate of a shaft of
+//! 5. **Synchronous**: at `a f1 + n f_s` (a = 0, 1, 2; |n| ≤ 3; f_s the rate of a shaft of
 //!    the gearbox; or a multiple of another mesh frequency) within half a grid step: "an
 //!    unmodelled component synchronous with shaft …".
-//! 5. Otherwise **non-synchronous**: "a bearing or another machine?".
+//! 6. Otherwise **non-synchronous**: "a bearing or another machine?".
 //!
 //! `missing` runs: a line the model makes and the record lacks (wrong description, sensor
 //! position, or an over-predicted line). Tolerance: 1.5 grid steps (`1.5 f1 / 128`).
 
 use super::ResidualFeature;
+use super::sidebands::SidebandCheck;
 use super::spectrum::{GRID_PERIODS, grid_index};
 use crate::gearbox::Gearbox;
 
@@ -79,7 +84,12 @@ pub(crate) fn fingerprint_gap(
 }
 
 /// Fill `guess` of every feature (see the module docs). `f1` in Hz.
-pub(crate) fn annotate(features: &mut [ResidualFeature], gb: &Gearbox, f1: f64) {
+pub(crate) fn annotate(
+    features: &mut [ResidualFeature],
+    gb: &Gearbox,
+    f1: f64,
+    sidebands: &[SidebandCheck],
+) {
     let step_hz = f1 / GRID_PERIODS;
     let tol_hz = 1.5 * step_hz;
     let extra: Vec<usize> = (0..features.len())
@@ -108,7 +118,54 @@ pub(crate) fn annotate(features: &mut [ResidualFeature], gb: &Gearbox, f1: f64) 
             }
         }
     }
-    // 2. harmonics of a stronger extra line.
+    // 2. sidebands off every shaft's rate: a speed or load fluctuation.
+    // (Not when the spacing is a low harmonic of some shaft's rate: that shaft's own
+    // sidebands, guessed below as synchronous.)
+    let synchronous = |c: &SidebandCheck| {
+        gb.shaft_ratios().into_iter().any(|(_, v)| {
+            (1..=3)
+                .any(|m| (c.spacing_ratio - m as f64 * v.abs()).abs() <= 0.75 * c.resolution_ratio)
+        })
+    };
+    if let Some(off) = sidebands.iter().find(|c| c.off_rate && !synchronous(c)) {
+        let d = off.spacing_ratio;
+        for &i in &extra {
+            if !features[i].guess.is_empty() {
+                continue;
+            }
+            let r = features[i].frequency_ratio;
+            let hit = [1.0f64, 2.0].iter().find_map(|&a| {
+                (-3i32..=3)
+                    .filter(|n| *n != 0)
+                    .find(|&n| (a + n as f64 * d - r).abs() <= 0.75 / GRID_PERIODS)
+                    .map(|n| (a, n))
+            });
+            if let Some((a, n)) = hit {
+                // The shaft whose rate lies nearest the spacing, for the reader.
+                let nearest = gb
+                    .shaft_ratios()
+                    .into_iter()
+                    .map(|(name, v)| (name, v.abs()))
+                    .filter(|(_, v)| *v > 0.0)
+                    .min_by(|x, y| (x.1 - d).abs().total_cmp(&(y.1 - d).abs()));
+                let near = nearest.map_or(String::new(), |(name, v)| {
+                    format!(" (the nearest shaft rate: `{name}`, {:.1} Hz)", v * f1)
+                });
+                features[i].guess = format!(
+                    "a sideband ({a:.0} f1 {n:+} × {:.1} Hz) of the mesh line: the record's \
+                     sidebands lie {:.1} Hz apart, off the rate of shaft `{}` ({:.1} Hz){near} \
+                     — the speed or the load fluctuates at {:.1} Hz; check the drive's speed \
+                     control and the driven load",
+                    off.spacing_hz,
+                    off.spacing_hz,
+                    off.shaft,
+                    off.shaft_ratio * f1,
+                    off.spacing_hz
+                );
+            }
+        }
+    }
+    // 3. harmonics of a stronger extra line.
     for &i in &extra {
         if !features[i].guess.is_empty() {
             continue;
@@ -130,7 +187,7 @@ pub(crate) fn annotate(features: &mut [ResidualFeature], gb: &Gearbox, f1: f64) 
             );
         }
     }
-    // 3–5.
+    // 4–6.
     let mut shafts: Vec<(String, f64)> = gb
         .shaft_ratios()
         .into_iter()
