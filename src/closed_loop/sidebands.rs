@@ -77,8 +77,9 @@ pub struct SidebandCheck {
     pub off_rate: bool,
     /// Whether the strongest spacing is the shaft's rate (within the tolerance).
     pub at_rate: bool,
-    /// Whether the window's maximum is its lower edge (the carrier's skirt): `spacing_ratio`
-    /// then says nothing.
+    /// Whether the window's maximum is its lower edge (the carrier's skirt, or stronger
+    /// sidebands below the window, such as a slower shaft's): `spacing_ratio` then says only
+    /// that the strongest sidebands are not in the window.
     pub edge_peak: bool,
 }
 
@@ -266,8 +267,16 @@ mod tests {
             // The same sidebands are off the rate of a shaft turning 15 % faster.
             let c2 = scan.check("other", 1.15 * s).unwrap();
             assert!(c2.off_rate && !c2.allows_modulation(), "{c2:?}");
-            assert!(refuses(std::slice::from_ref(&c2), SHAFT_MODULATION, c2.shaft_ratio));
-            assert!(refuses(std::slice::from_ref(&c2), TOOTH_DAMAGE, c2.shaft_ratio));
+            assert!(refuses(
+                std::slice::from_ref(&c2),
+                SHAFT_MODULATION,
+                c2.shaft_ratio
+            ));
+            assert!(refuses(
+                std::slice::from_ref(&c2),
+                TOOTH_DAMAGE,
+                c2.shaft_ratio
+            ));
             assert!(!refuses(std::slice::from_ref(&c2), TOOTH_DAMAGE, s));
             assert!(
                 (c2.spacing_hz - s * f1).abs() < 0.3 * scan.bin * f1,
@@ -295,7 +304,11 @@ mod tests {
         let c = scan.check("input", 1.0 / 29.0).unwrap();
         // Nothing off the rate, but no evidence for modulation at it either.
         assert!(!c.off_rate && !c.allows_modulation(), "{c:?}");
-        assert!(!refuses(std::slice::from_ref(&c), TOOTH_DAMAGE, c.shaft_ratio));
+        assert!(!refuses(
+            std::slice::from_ref(&c),
+            TOOTH_DAMAGE,
+            c.shaft_ratio
+        ));
         // A shaft under 1.6 bins: inside the carrier's main lobe.
         assert!(scan.check("slow", scan.bin).is_none());
         assert!(SidebandScan::new(&[0.0; 10], fs, f1, 2.5).is_none());
