@@ -175,8 +175,9 @@ pub struct Candidate {
     pub fingerprint_share: f64,
     /// Whether it could be claimed: fingerprint share reached and the plain RMS error of the
     /// table's estimate lowered (and, for tooth damage, the damaged gear's TSA impulsive where
-    /// the record has one, see [`TOOTH_TSA_FM4`]; for shaft modulation and tooth damage, the
-    /// record's sidebands not off the shaft's rate, see [`sidebands`]).
+    /// the record has one, see [`TOOTH_TSA_FM4`], and the record's sidebands not off its
+    /// shaft's rate; for shaft modulation, the record's strongest sidebands at its shaft's
+    /// rate, see [`sidebands`]).
     pub eligible: bool,
     /// Tooth damage: FM4 of the damaged gear's shaft's TSA difference signal (the diagnosis's
     /// order analysis); absent when the record holds too few revolutions of that shaft.

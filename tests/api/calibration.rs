@@ -98,6 +98,14 @@ async fn calibrate_keep_use_and_clear(b: Backend) {
     assert_eq!(h["location"], "/v1/machines/gb-1/calibration");
     let rep = json(&body);
     assert_eq!(names(&rep["effects"]), vec!["shaft-modulation"]);
+    // Behind the claim, the record's own sidebands: at the input shaft's rate (1/29 f1).
+    let checks = rep["sideband_checks"].as_array().expect("sideband_checks");
+    assert!(
+        checks.iter().any(|c| {
+            c["at_rate"] == true && (c["shaft_ratio"].as_f64().unwrap() - 1.0 / 29.0).abs() < 1e-9
+        }),
+        "{checks:?}"
+    );
     let (e0, e1) = (
         rep["error_before"].as_f64().unwrap(),
         rep["error_after"].as_f64().unwrap(),
@@ -112,6 +120,7 @@ async fn calibrate_keep_use_and_clear(b: Backend) {
     assert_eq!(got["id"], cal_id.as_str());
     assert_eq!(got["machine_id"], "gb-1");
     assert_eq!(got["effects"], rep["effects"]);
+    assert_eq!(got["sideband_checks"], rep["sideband_checks"]);
     assert_eq!(got["error_after"], rep["error_after"]);
 
     // A later record of the machine (another seed, same gearbox) is diagnosed with the
