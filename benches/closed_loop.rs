@@ -11,7 +11,9 @@
 //! report). Rows carry `fm4`, `kurtosis`, `tsa_fm4` and `speed_std` (the diagnosis's condition
 //! indicators, per-shaft TSA FM4 and its order tracking's speed spread) besides the closed
 //! loop's answer, and `ea_refit`, `ea_profile`, `method` (the wear refit, the profile's vertex,
-//! `wear_after`'s method).
+//! `wear_after`'s method); `wander_rate`, `truth_shaft`, `named_shaft`, the report's
+//! `sidebands` and a pair's `member_visible`. `CL_INDICES=3,17` runs only those records of the
+//! set (same draws).
 //!
 //! Every record: ea ~ U[0.1, 1], Ω1 ~ U over the table's band, gain log-uniform 1e-2 … 1e2,
 //! white noise at SNR ~ U[20, 30] dB, 16 kHz, 0.6 s, random initial state. Kinds cycle in a fixed
@@ -35,7 +37,9 @@
 //! closed loop's grid (at the true f1) differs from the same record without the effect (same
 //! seeds) by more than it differs from the same record with the effect and another seed
 //! (another initial state and noise): `std(M − M_without) > std(M − M_other seed)` (std: the
-//! RMS about the mean difference, so that a level change alone does not count).
+//! RMS about the mean difference, so that a level change alone does not count). A pair's
+//! members are judged one at a time the same way (the record against the same record without
+//! that member, the other kept): `member_visible`.
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -132,6 +136,9 @@ struct Row {
     wander_rate: Option<f64>,
     /// Shaft modulation / tooth damage: the rate over f1 of the shaft the rig put it on.
     truth_shaft: Option<f64>,
+    /// A pair's members, each visible on its own (the record against the same record without
+    /// that member) or not.
+    member_visible: Vec<(String, bool)>,
     /// The claimed shaft modulation's / tooth damage's shaft rate over f1.
     named_shaft: Option<f64>,
     /// The report's sideband checks: (shaft, spacing over f1, prominence dB, off the rate,
@@ -301,6 +308,27 @@ fn main() {
                         std_diff(&m, &ls(&other.samples)?),
                     )
                 };
+                // A pair's members one at a time: the record against the same record without
+                // that member (the other kept), by the same measure as `visible`.
+                let member_visible: Vec<(String, bool)> = if kind == "pair" {
+                    let mut out = Vec::new();
+                    for name in &truth {
+                        let mut less = e;
+                        if name == "path-resonance" {
+                            less.path_peak = None;
+                        } else {
+                            less.eccentricity = None;
+                            less.eccentricity_shaft = None;
+                            less.tooth = None;
+                        }
+                        let w = generate(&gb, &RigSpec { effects: less, ..spec })
+                            .map_err(|e| e.to_string())?;
+                        out.push((name.clone(), std_diff(&m, &ls(&w.samples)?) > v_noise));
+                    }
+                    out
+                } else {
+                    Vec::new()
+                };
                 let diag = gearwear::diagnosis::diagnose(&rec, &table, &Default::default()).ok();
                 let ci = diag
                     .as_ref()
@@ -339,7 +367,7 @@ fn main() {
                         })
                         .unwrap_or_default();
                     return Err(format!(
-                        "indicators only: sidebands {sb:?} fm4 {:.3} kurtosis {:.3} tooth {:?} wander {:?} visible {} tsa {:?} speed_std {:.6}",
+                        "indicators only: members visible {member_visible:?} sidebands {sb:?} fm4 {:.3} kurtosis {:.3} tooth {:?} wander {:?} visible {} tsa {:?} speed_std {:.6}",
                         ci.0,
                         ci.1,
                         e.tooth,
@@ -412,6 +440,7 @@ fn main() {
                     speed_std,
                     wander_rate: e.speed_wander.map(|w| w.1),
                     truth_shaft: e.eccentricity_shaft.or(e.tooth.map(|t| t.0)),
+                    member_visible,
                     named_shaft: rep
                         .effects
                         .iter()
@@ -469,6 +498,7 @@ fn main() {
                 speed_std: f64::NAN,
                 wander_rate: e.speed_wander.map(|w| w.1),
                 truth_shaft: e.eccentricity_shaft.or(e.tooth.map(|t| t.0)),
+                member_visible: vec![],
                 named_shaft: None,
                 sidebands: vec![],
             });
@@ -599,6 +629,24 @@ fn report(rows: &[Row], n: usize, base: u64, wall: f64) {
         pct(
             lib_all.iter().filter(|r| named_right(r)).count(),
             lib_all.len()
+        )
+    );
+    // Pairs member by member: each member that is visible on its own, named or not.
+    let members: Vec<(bool, bool)> = rows
+        .iter()
+        .filter(|r| r.kind == "pair")
+        .flat_map(|r| {
+            r.member_visible
+                .iter()
+                .map(|(n, v)| (*v, r.named.contains(n)))
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    println!(
+        "| pair members visible on their own: named | {} | — |",
+        pct(
+            members.iter().filter(|m| m.0 && m.1).count(),
+            members.iter().filter(|m| m.0).count()
         )
     );
     println!(
