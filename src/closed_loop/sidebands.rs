@@ -140,7 +140,8 @@ impl SidebandScan {
         };
         for k in [1.0, 2.0] {
             let c = k * f1;
-            if k > band_hi || c + 3.0 * f1 * 0.1 >= 0.5 * fs {
+            // In the band, with room below Nyquist for sidebands up to 0.3 f1 above it.
+            if k > band_hi || c + 0.3 * f1 >= 0.5 * fs {
                 continue;
             }
             // Re-centre on the measured peak within ±1 bin.
