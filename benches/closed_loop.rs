@@ -46,7 +46,7 @@ use std::time::Instant;
 
 use gearwear::closed_loop::effects::reference_gears;
 use gearwear::closed_loop::sidebands::SidebandScan;
-use gearwear::closed_loop::spectrum::log_spectrum;
+use gearwear::closed_loop::spectrum::{BAND_HI, log_spectrum};
 use gearwear::closed_loop::virtual_rig::{RigEffects, RigSpec, generate};
 use gearwear::closed_loop::{CalibrateOptions, calibrate};
 use gearwear::signature::{SignatureTable, SplitMix64, mix_seed};
@@ -351,7 +351,7 @@ fn main() {
                 if std::env::var("CL_INDICATORS_ONLY").is_ok() {
                     let sb: Vec<String> = diag
                         .as_ref()
-                        .and_then(|d| SidebandScan::new(&rec.samples, spec.sample_rate, d.f1_hz, 2.5))
+                        .and_then(|d| SidebandScan::new(&rec.samples, spec.sample_rate, d.f1_hz, BAND_HI))
                         .map(|scan| {
                             reference_gears(&gb)
                                 .iter()

@@ -23,9 +23,10 @@
 //!    `BIC = J ln(Σρ/J) + k ln J` (J grid points).
 //! 6. **Selection**: only candidates whose improvement falls on their fingerprint
 //!    ([`SUPPORT_SHARE`], see [`Candidate::fingerprint_share`]) and that lower the plain RMS
-//!    error are eligible (an effect of a shaft whose rate the record's sidebands are not at,
-//!    measured at the record's own resolution, is not: [`sidebands`]); the lowest BIC of the eligible single effects wins if it beats "no
-//!    effect" by `bic_margin + null_z · null_spread` (`null_spread`: the standard deviation of
+//!    error are eligible (as measured at the record's own resolution, [`sidebands`]: shaft
+//!    modulation only where the record's strongest sidebands are at its shaft's rate, tooth
+//!    damage not where they are off it); the lowest BIC of the eligible single effects wins if
+//!    it beats "no effect" by `bic_margin + null_z · null_spread` (`null_spread`: the standard deviation of
 //!    the plain model's deviance over the model seeds — what luck alone gives; times
 //!    [`TOOTH_MARGIN_FACTOR`] for tooth damage); a pair replaces
 //!    it only if each member is eligible on its own with a BIC below "no effect"'s and the pair
@@ -846,9 +847,9 @@ pub fn calibrate(
             shafts.push(g.clone());
         }
     }
-    // Where the record's sidebands lie, at its own resolution ([`sidebands`]): an element
-    // effect of a shaft whose rate the sidebands are not at (shaft modulation: or without
-    // sidebands at that rate) is not eligible.
+    // Where the record's sidebands lie, at its own resolution ([`sidebands`]): shaft
+    // modulation is eligible only where the strongest are at its shaft's rate, tooth damage
+    // not where they are off it ([`refuses`]).
     let scan = SidebandScan::new(&record.samples, fs, f1, spectrum::BAND_HI);
     let sideband_checks: Vec<SidebandCheck> = shafts
         .iter()

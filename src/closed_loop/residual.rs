@@ -95,6 +95,14 @@ pub(crate) fn annotate(
     let extra: Vec<usize> = (0..features.len())
         .filter(|&i| features[i].kind == "extra")
         .collect();
+    // The gearbox's shaft rates over f1 (named, positive), fastest first.
+    let mut shafts: Vec<(String, f64)> = gb
+        .shaft_ratios()
+        .into_iter()
+        .map(|(n, v)| (n, v.abs()))
+        .filter(|(_, v)| *v > 0.0)
+        .collect();
+    shafts.sort_by(|a, b| b.1.total_cmp(&a.1));
     // 1. mains: odd harmonics of 50 or 60 Hz.
     for mains in [50.0, 60.0] {
         let near = |f: f64| -> Option<u32> {
@@ -122,9 +130,8 @@ pub(crate) fn annotate(
     // (Not when the spacing is a low harmonic of some shaft's rate: that shaft's own
     // sidebands, guessed below as synchronous.)
     let synchronous = |c: &SidebandCheck| {
-        gb.shaft_ratios().into_iter().any(|(_, v)| {
-            (1..=3)
-                .any(|m| (c.spacing_ratio - m as f64 * v.abs()).abs() <= 0.75 * c.resolution_ratio)
+        shafts.iter().any(|(_, v)| {
+            (1..=3).any(|m| (c.spacing_ratio - m as f64 * v).abs() <= 0.75 * c.resolution_ratio)
         })
     };
     if let Some(off) = sidebands.iter().find(|c| c.off_rate && !synchronous(c)) {
@@ -141,16 +148,15 @@ pub(crate) fn annotate(
                     .map(|n| (a, n))
             });
             if let Some((a, n)) = hit {
-                // The shaft whose rate lies nearest the spacing, for the reader.
-                let nearest = gb
-                    .shaft_ratios()
-                    .into_iter()
-                    .map(|(name, v)| (name, v.abs()))
-                    .filter(|(_, v)| *v > 0.0)
-                    .min_by(|x, y| (x.1 - d).abs().total_cmp(&(y.1 - d).abs()));
-                let near = nearest.map_or(String::new(), |(name, v)| {
-                    format!(" (the nearest shaft rate: `{name}`, {:.1} Hz)", v * f1)
-                });
+                // The shaft whose rate lies nearest the spacing, for the reader (when it is
+                // not the checked shaft itself).
+                let near = shafts
+                    .iter()
+                    .min_by(|x, y| (x.1 - d).abs().total_cmp(&(y.1 - d).abs()))
+                    .filter(|(name, _)| *name != off.shaft)
+                    .map_or(String::new(), |(name, v)| {
+                        format!(" (the nearest shaft rate: `{name}`, {:.1} Hz)", v * f1)
+                    });
                 features[i].guess = format!(
                     "a sideband ({a:.0} f1 {n:+} × {:.1} Hz) of the mesh line: the record's \
                      sidebands lie {:.1} Hz apart, off the rate of shaft `{}` ({:.1} Hz){near} \
@@ -188,13 +194,6 @@ pub(crate) fn annotate(
         }
     }
     // 4–6.
-    let mut shafts: Vec<(String, f64)> = gb
-        .shaft_ratios()
-        .into_iter()
-        .map(|(n, v)| (n, v.abs()))
-        .filter(|(_, v)| *v > 0.0)
-        .collect();
-    shafts.sort_by(|a, b| b.1.total_cmp(&a.1));
     let meshes: Vec<f64> = gb.mesh_ratios.clone();
     let tol_r = 0.5 / GRID_PERIODS;
     for f in features.iter_mut() {

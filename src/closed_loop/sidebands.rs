@@ -15,7 +15,8 @@
 //!
 //! `C(δ) = Σ_k [P(c_k + δ) + P(c_k − δ)] / P(c_k)`, `P(f) = |Σ_n w_n x_n e^{−i2π f n/fs}|²`,
 //!
-//! (carriers 30 dB under the strongest left out), and [`SidebandScan::check`] finds the strongest spacing `δ*` in `[max(2.5 b, 0.4 s), 1.6 s]`.
+//! (carriers 30 dB under the strongest left out), and [`SidebandScan::check`] finds the
+//! strongest spacing `δ*` in `[max(2.5 b, 0.4 s), 1.6 s]`.
 //! The sidebands are **off the shaft's rate** when all of these hold: `|δ* − s| > `
 //! [`SPACING_TOL_BINS`]` · b`; `C(δ*)` is at least [`OFF_RATE_DOMINANCE`] times the strongest
 //! `C` within half a bin of `s`; and `C(δ*)` stands [`PROMINENCE`] times above the median of
@@ -24,7 +25,7 @@
 //! shaft does not explain the record's sidebands and is not eligible; the spacing is reported
 //! (a speed or load fluctuation at `δ* f1` Hz).
 //!
-//! Shaft modulation also needs positive evidence ([`SidebandCheck::allows_modulation`]): the
+//! Shaft modulation also needs positive evidence (`at_rate`, [`refuses`]): the
 //! strongest spacing **at** the shaft's rate (within the same tolerance). Where the maximum is
 //! the carrier's skirt at the window's lower edge the record cannot show that, and modulation
 //! at that shaft is not claimed (on seeds 6 and 7 of `benches/closed_loop.rs`, a fallback —
@@ -83,23 +84,16 @@ pub struct SidebandCheck {
     pub edge_peak: bool,
 }
 
-impl SidebandCheck {
-    /// Whether the record's sidebands allow modulation at this shaft: the strongest of the
-    /// window at its rate.
-    pub fn allows_modulation(&self) -> bool {
-        self.at_rate
-    }
-}
-
 /// Whether the record's sidebands (`checks`) refuse the element effect `name` at the shaft
-/// turning at `shaft_ratio` f1: shaft modulation unless [`SidebandCheck::allows_modulation`],
-/// tooth damage when they lie off the shaft's rate. A shaft without a check is not refused.
+/// turning at `shaft_ratio` f1: shaft modulation unless the strongest are at the shaft's rate
+/// (`at_rate`), tooth damage when they lie off it (`off_rate`). A shaft without a check is not
+/// refused.
 pub fn refuses(checks: &[SidebandCheck], name: &str, shaft_ratio: f64) -> bool {
     checks
         .iter()
         .filter(|c| (c.shaft_ratio - shaft_ratio).abs() < 1e-9)
         .any(|c| match name {
-            SHAFT_MODULATION => !c.allows_modulation(),
+            SHAFT_MODULATION => !c.at_rate,
             TOOTH_DAMAGE => c.off_rate,
             _ => false,
         })
@@ -263,11 +257,11 @@ mod tests {
             let (x, fs, f1) = record(s, fm, 0.05);
             let scan = SidebandScan::new(&x, fs, f1, 2.5).unwrap();
             let c = scan.check("input", s).unwrap();
-            assert!(!c.off_rate && c.at_rate && c.allows_modulation(), "{c:?}");
+            assert!(!c.off_rate && c.at_rate, "{c:?}");
             assert!((c.spacing_ratio - s).abs() < 0.3 * scan.bin, "{c:?}");
             // The same sidebands are off the rate of a shaft turning 15 % faster.
             let c2 = scan.check("other", 1.15 * s).unwrap();
-            assert!(c2.off_rate && !c2.allows_modulation(), "{c2:?}");
+            assert!(c2.off_rate && !c2.at_rate, "{c2:?}");
             assert!(refuses(
                 std::slice::from_ref(&c2),
                 SHAFT_MODULATION,
@@ -304,7 +298,7 @@ mod tests {
         let scan = SidebandScan::new(&x, fs, f1, 2.5).unwrap();
         let c = scan.check("input", 1.0 / 29.0).unwrap();
         // Nothing off the rate, but no evidence for modulation at it either.
-        assert!(!c.off_rate && !c.allows_modulation(), "{c:?}");
+        assert!(!c.off_rate && !c.at_rate, "{c:?}");
         assert!(!refuses(
             std::slice::from_ref(&c),
             TOOTH_DAMAGE,
