@@ -20,6 +20,9 @@
                              threads; a request without a 2xx answer (502, connection reset…)
                              is sent again with the same key, at most 40 times, 0.25 s apart.
                              OUT gets one JSON line per acknowledged record; prints a summary.
+                             With INGEST_UNTIL=FILE in the environment, RECORDS is a minimum:
+                             it goes on until FILE exists (so a fast machine cannot finish
+                             before the faults it is meant to see).
   deliveries LOG SECRET      checks the receiver's log: every 2xx-answered delivery id once,
                              every signature valid; prints a JSON summary.
   cpu PID…                   user+system CPU seconds of each given process (JSON object),
@@ -29,6 +32,7 @@
 """
 import hashlib
 import hmac
+import itertools
 import json
 import os
 import select
@@ -216,17 +220,18 @@ def ingest(url, key, body_path, records, clients, out_path, machines=4, prefix="
     lock = threading.Lock()
     out = open(out_path, "w", buffering=1)
     statuses = {}
-    counters = {"acked": 0, "resends": 0, "replayed_acks": 0, "given_up": 0}
-    nxt = iter(range(records))
+    counters = {"sent": 0, "acked": 0, "resends": 0, "replayed_acks": 0, "given_up": 0}
+    until = os.environ.get("INGEST_UNTIL")
+    nxt = itertools.count()
     t0 = time.time()
 
     def worker(c):
         while True:
             with lock:
-                try:
-                    n = next(nxt)
-                except StopIteration:
+                n = next(nxt)
+                if n >= records and not (until and not os.path.exists(until)):
                     return
+                counters["sent"] = n + 1
             idem = f"kill-{run}-{n}"
             path = f"/v1/machines/{prefix}-{n % machines}/records?sample_rate_hz=25600"
             for attempt in range(40):
