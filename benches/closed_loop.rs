@@ -13,7 +13,7 @@
 //! loop's answer, and `ea_refit`, `ea_profile`, `method` (the wear refit, the profile's vertex,
 //! `wear_after`'s method); `wander_rate`, `truth_shaft`, `named_shaft`, the report's
 //! `sidebands` and a pair's `member_visible`. `CL_INDICES=3,17` runs only those records of the
-//! set (same draws).
+//! set (same draws) and prints each one's `RigSpec`.
 //!
 //! Every record: ea ~ U[0.1, 1], Ω1 ~ U over the table's band, gain log-uniform 1e-2 … 1e2,
 //! white noise at SNR ~ U[20, 30] dB, 16 kHz, 0.6 s, random initial state. Kinds cycle in a fixed
@@ -278,6 +278,10 @@ fn main() {
                 seed: mix_seed(&[base, i as u64, 1]),
                 effects: e,
             };
+            if !indices.is_empty() {
+                // Looking at single records: the draw in full, to turn a record into a test.
+                eprintln!("record {i}: {spec:?}");
+            }
             let t = Instant::now();
             let run = || -> Result<Row, String> {
                 let rec = generate(&gb, &spec).map_err(|e| e.to_string())?;

@@ -19,7 +19,9 @@
 //!    effect (shaft modulation on either shaft of the reference mesh, planetary wear, a damaged
 //!    tooth on either gear of the reference mesh: the modulation amplitude scaled from the
 //!    residual at its sideband lines, the planetary error and the tooth's stiffness loss by
-//!    their score over a grid; ea profiled locally, amplitude again), and the pairs. Scored by
+//!    their score over a grid; ea profiled locally, amplitude again), and the pairs (an element
+//!    effect with a resonance searched again over the band on top of the element's spectrum,
+//!    or with the single resonance's, whichever fits better). Scored by
 //!    `BIC = J ln(Σρ/J) + k ln J` (J grid points).
 //! 6. **Selection**: only candidates whose improvement falls on their fingerprint
 //!    ([`SUPPORT_SHARE`], see [`Candidate::fingerprint_share`]) and that lower the plain RMS
@@ -29,8 +31,9 @@
 //!    it beats "no effect" by `bic_margin + null_z · null_spread` (`null_spread`: the standard deviation of
 //!    the plain model's deviance over the model seeds — what luck alone gives; times
 //!    [`TOOTH_MARGIN_FACTOR`] for tooth damage); a pair replaces
-//!    it only if each member is eligible on its own with a BIC below "no effect"'s and the pair
-//!    beats the best single by that margin.
+//!    it only if it beats the best single by that margin and each member is supported: eligible
+//!    on its own with a BIC below "no effect"'s, or, given the other member, with the pair's
+//!    improvement over the other member's best single falling on its fingerprint.
 //! 7. **Refit**: a path resonance alone — the record de-coloured by the fitted `|H|`
 //!    ([`held::decolour_with`]) and diagnosed again: the table's posterior is the wear
 //!    (`table-posterior-decoloured`). With an element effect, the table's posterior with the
@@ -1020,11 +1023,18 @@ pub fn calibrate(
         }
     }
     for (name, p) in &best_variant {
-        cands.push(make(
-            format!("{name}+{PATH_RESONANCE}"),
-            *p,
-            Some(res_best),
-        )?);
+        // The resonance of a pair is searched again over the whole band on top of the element
+        // effect's spectrum: the one found on the plain model may be a stand-in for the
+        // element's own lines. The better of that and the single resonance's is kept.
+        let pair = format!("{name}+{PATH_RESONANCE}");
+        let from_single = make(pair.clone(), *p, Some(res_best))?;
+        let searched = search_resonance(&m, &sim.spectrum(p)?, &r, w).0.resonance;
+        let from_search = make(pair, *p, searched)?;
+        cands.push(if from_search.rss < from_single.rss {
+            from_search
+        } else {
+            from_single
+        });
     }
     for (i, (na, pa)) in best_variant.iter().enumerate() {
         for (nb, pb) in best_variant.iter().skip(i + 1) {
@@ -1111,39 +1121,43 @@ pub fn calibrate(
                 .fm4
         })
         .collect();
+    // An effect's fingerprint: the grid points its improvement must fall on.
+    let fingerprint = |e: &Effect, mask: &mut [bool]| {
+        let s = e.parameters.get("shaft_ratio").copied().unwrap_or(0.0);
+        match e.name.as_str() {
+            PATH_RESONANCE => {
+                for (mk, l) in mask.iter_mut().zip(&line_mask) {
+                    *mk |= *l;
+                }
+            }
+            SHAFT_MODULATION => {
+                let sb: Vec<f64> = line_peaks
+                    .iter()
+                    .flat_map(|l| [l - s, l + s])
+                    .chain([1.0 - s, 1.0 + s, 2.0 - s, 2.0 + s])
+                    .collect();
+                near(&sb, mask)
+            }
+            TOOTH_DAMAGE => {
+                // A pulse one mesh period long, once a revolution: shaft-order sidebands
+                // of about equal size out to ± z/2 orders around every mesh harmonic,
+                // i.e. the shaft's whole order comb m s over the band (for a gear of many
+                // teeth that is every grid point: then only the score, the error and the
+                // TSA test decide).
+                if s > 0.0 {
+                    let top = (r[r.len() - 1] / s).ceil() as usize;
+                    let comb: Vec<f64> = (1..=top).map(|k| k as f64 * s).collect();
+                    near(&comb, mask);
+                }
+            }
+            _ => near(&fam_wide, mask),
+        }
+    };
     let mut support: Vec<f64> = vec![1.0; cands.len()];
     for (ci, c) in cands.iter().enumerate().skip(1) {
         let mut mask = vec![false; r.len()];
         for e in &c.effects {
-            let s = e.parameters.get("shaft_ratio").copied().unwrap_or(0.0);
-            match e.name.as_str() {
-                PATH_RESONANCE => {
-                    for (mk, l) in mask.iter_mut().zip(&line_mask) {
-                        *mk |= *l;
-                    }
-                }
-                SHAFT_MODULATION => {
-                    let sb: Vec<f64> = line_peaks
-                        .iter()
-                        .flat_map(|l| [l - s, l + s])
-                        .chain([1.0 - s, 1.0 + s, 2.0 - s, 2.0 + s])
-                        .collect();
-                    near(&sb, &mut mask)
-                }
-                TOOTH_DAMAGE => {
-                    // A pulse one mesh period long, once a revolution: shaft-order sidebands
-                    // of about equal size out to ± z/2 orders around every mesh harmonic,
-                    // i.e. the shaft's whole order comb m s over the band (for a gear of many
-                    // teeth that is every grid point: then only the score, the error and the
-                    // TSA test decide).
-                    if s > 0.0 {
-                        let top = (r[r.len() - 1] / s).ceil() as usize;
-                        let comb: Vec<f64> = (1..=top).map(|k| k as f64 * s).collect();
-                        near(&comb, &mut mask);
-                    }
-                }
-                _ => near(&fam_wide, &mut mask),
-            }
+            fingerprint(e, &mut mask);
         }
         let fc = sensor_model(&sim.spectrum(&c.params)?, &r, &c.sensor);
         let plain = sim.spectrum(&ElementParams::plain(c.params.ea, baseline_planetary))?;
@@ -1216,6 +1230,36 @@ pub fn calibrate(
             c.effects.len() == 1 && c.effects[0].name == name && *b < bic0 && eligible(i)
         })
     };
+    // Or, in a pair, supported given the other member: the pair's improvement over the best
+    // single of the other member falls on this member's fingerprint (share ≥
+    // [`SUPPORT_SHARE`]). A resonance the element's lines hide from a search on the plain
+    // model, or an element the resonance's colouring hides, is then judged where both are
+    // fitted. (The pair's own checks — its fingerprint share, the coloured lines of its
+    // resonance, the sidebands, the TSA — still apply.)
+    let supported_given = |pair: usize, member: &Effect| -> Result<bool> {
+        let Some(other) = cands[pair].effects.iter().find(|e| e.name != member.name) else {
+            return Ok(false);
+        };
+        let Some(o) = (1..n_single)
+            .filter(|&i| cands[i].effects.len() == 1 && cands[i].effects[0].name == other.name)
+            .min_by(|&a, &b| scores[a].total_cmp(&scores[b]))
+        else {
+            return Ok(false);
+        };
+        let mut mask = vec![false; r.len()];
+        fingerprint(member, &mut mask);
+        let fo = sensor_model(&sim.spectrum(&cands[o].params)?, &r, &cands[o].sensor);
+        let fp = sensor_model(&sim.spectrum(&cands[pair].params)?, &r, &cands[pair].sensor);
+        let (mut tot, mut inside) = (0.0, 0.0);
+        for j in 0..r.len() {
+            let d = (m[j] - fo[j]).powi(2) - (m[j] - fp[j]).powi(2);
+            tot += d;
+            if mask[j] {
+                inside += d;
+            }
+        }
+        Ok(tot > 0.0 && inside / tot >= SUPPORT_SHARE)
+    };
     let margin_of = |c: &Fitted| {
         if c.effects.iter().any(|e| e.name == TOOTH_DAMAGE) {
             TOOTH_MARGIN_FACTOR * claim_margin
@@ -1231,7 +1275,10 @@ pub fn calibrate(
         chosen = single;
         if let Some(pair) = best_of(&|i| cands[i].effects.len() == 2) {
             // A pair needs every member supported on its own, and to beat the best single.
-            let members_ok = cands[pair].effects.iter().all(|e| supported(&e.name));
+            let mut members_ok = true;
+            for e in &cands[pair].effects {
+                members_ok &= supported(&e.name) || supported_given(pair, e)?;
+            }
             if members_ok && scores[pair] < scores[single] - margin_of(&cands[pair]) {
                 chosen = pair;
             }
