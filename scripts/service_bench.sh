@@ -11,7 +11,8 @@
 #   scripts/service_bench.sh [BINARY] [LABEL]      # default: target/release/gearwear, "this"
 #
 # Environment (defaults in brackets): BENCH_RECORDS [model four], BENCH_FORMATS [json f32],
-# BENCH_SECONDS [15], BENCH_CONCURRENCY [4], BENCH_SERVE_ARGS [none; e.g.
+# BENCH_SECONDS [15], BENCH_CONCURRENCY [4], BENCH_STORE [sqlite; or postgres: a fresh database on
+# 127.0.0.1:5432, and the PostgreSQL processes' CPU per record is printed], BENCH_SERVE_ARGS [none; e.g.
 # "--raw-retention-days 0"]. When `perf` can count hardware events, each case also prints the
 # whole machine's user-space instructions and user/kernel cycles per record (server, load
 # generator and anything else running): a load-independent figure for A/B comparisons on a
@@ -27,13 +28,23 @@ label=${2:-this}
 cargo build --release --quiet --bin gearwear --example loadgen
 LG=${CARGO_TARGET_DIR:-target}/release/examples/loadgen
 . scripts/lib/serve.sh
-gw_fresh_store sqlite bench
+gw_fresh_store "${BENCH_STORE:-sqlite}" bench
 trap gw_cleanup EXIT
 "${CARGO_TARGET_DIR:-target}"/release/gearwear synth --ea 0.5 --output "$GW_DIR/model.wav" >/dev/null
 key=$(gw_key ingest,read)
 # shellcheck disable=SC2086
 gw_serve "$GW_DIR/serve.log" --allow-stale-table ${BENCH_SERVE_ARGS:-}
 pid=$GW_PID port=$GW_PORT
+# CPU seconds of the PostgreSQL server's processes (0 for SQLite, which runs in the server).
+db_cpu() {
+  if [ "${BENCH_STORE:-sqlite}" = postgres ]; then
+    # shellcheck disable=SC2046
+    python3 scripts/lib/cluster_tool.py cpu $(pgrep -x postgres) |
+      python3 -c 'import json,sys; print(sum(json.load(sys.stdin).values()))'
+  else
+    echo 0
+  fi
+}
 d=$GW_DIR
 echo "# $label: $B, $(date -u +%FT%TZ), load average $(cut -d' ' -f1-3 /proc/loadavg)"
 secs=${BENCH_SECONDS:-15}
@@ -51,11 +62,13 @@ for rec in ${BENCH_RECORDS:-model four}; do
       perf_pid=$!
     fi
     curl -fs "http://127.0.0.1:$port/metrics" >"$d/metrics.before" || true
+    mach0=$(python3 scripts/lib/cluster_tool.py machine_cpu) db0=$(db_cpu)
     "$LG" --url "http://127.0.0.1:$port" --key "$key" --concurrency "${BENCH_CONCURRENCY:-4}" \
       --seconds "$secs" --format "$fmt" --pid "$pid" "${extra[@]}" 2>&1 | tail -1 >"$d/run.json"
     [ -n "$perf_pid" ] && wait "$perf_pid"
     curl -fs "http://127.0.0.1:$port/metrics" >"$d/metrics.after" || true
-    STAT="$stat" python3 -c "
+    mach1=$(python3 scripts/lib/cluster_tool.py machine_cpu) db1=$(db_cpu)
+    MACH="$mach0 $mach1" DB="$db0 $db1" STAT="$stat" python3 -c "
 import json, os
 s = json.load(open('$d/run.json'))
 line = (f\"$label $rec {s['format']:4} {s['records_per_second']:6.1f} rec/s  p50 {s['p50_ms']:5.1f} ms  p99 {s['p99_ms']:5.1f} ms  \"
@@ -89,6 +102,13 @@ if n > 0 and len(b) > 1:
     parts = [(k, (b[k] - a.get(k, 0.0)) / n * 1e3) for k in sorted(b) if k != '_records']
     tot = sum(v for _, v in parts)
     print('    stages, CPU ms/record: ' + ', '.join(f'{k} {v:.2f}' for k, v in parts)
-          + f'; sum {tot:.2f} of {s[\"server_cpu_ms_per_record\"]:.2f} (the rest: HTTP, store threads, kernel)')"
+          + f'; sum {tot:.2f} of {s[\"server_cpu_ms_per_record\"]:.2f} (the rest: HTTP, store threads, kernel)')
+    dg = dict(parts).get('diagnosis')
+    m = [float(x) for x in os.environ['MACH'].split()]
+    db = [float(x) for x in os.environ['DB'].split()]
+    if dg:
+        print(f'    server CPU / diagnosis stage {s[\"server_cpu_ms_per_record\"] / dg:.2f}; '
+              f'whole machine {(m[3] - m[0]) / s[\"records\"] * 1e3:.2f} ms/record of CPU'
+              + (f', database server {(db[1] - db[0]) / s[\"records\"] * 1e3:.2f}' if db[1] > 0 else ''))"
   done
 done
