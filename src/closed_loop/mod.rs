@@ -541,6 +541,21 @@ fn effect_shaft(e: f64, shaft: &MeshGear) -> Effect {
     }
 }
 
+/// Share of the improvement from model `from` to model `to` (dB² of the record `m`'s
+/// residual, summed over the grid, unweighted: where the improvement lies — the 25 % of
+/// [`SUPPORT_SHARE`] was set so) that falls on the `mask`ed points; 0 when nothing improves.
+fn improvement_share(m: &[f64], from: &[f64], to: &[f64], mask: &[bool]) -> f64 {
+    let (mut tot, mut inside) = (0.0, 0.0);
+    for j in 0..m.len() {
+        let d = (m[j] - from[j]).powi(2) - (m[j] - to[j]).powi(2);
+        tot += d;
+        if mask[j] {
+            inside += d;
+        }
+    }
+    if tot > 0.0 { inside / tot } else { 0.0 }
+}
+
 fn effect_resonance(res: &Resonance, f1: f64) -> Effect {
     let mut p = BTreeMap::new();
     p.insert("frequency_ratio".into(), res.rho);
@@ -1163,16 +1178,7 @@ pub fn calibrate(
         let plain = sim.spectrum(&ElementParams::plain(c.params.ea, baseline_planetary))?;
         let (sp, _) = fit_sensor(&m, &plain, &r, None, w);
         let f_none = sensor_model(&plain, &r, &sp);
-        let (mut tot, mut inside) = (0.0, 0.0);
-        for j in 0..r.len() {
-            // Unweighted: where the improvement in dB² lies (the share's 25 % was set so).
-            let d = (m[j] - f_none[j]).powi(2) - (m[j] - fc[j]).powi(2);
-            tot += d;
-            if mask[j] {
-                inside += d;
-            }
-        }
-        support[ci] = if tot > 0.0 { inside / tot } else { 0.0 };
+        support[ci] = improvement_share(&m, &f_none, &fc, &mask);
         // A path stage colours what the gearbox makes: it must move at least
         // [`MIN_COLOURED_LINES`] of the plain model's lines by more than 3 dB relative to f1.
         // A narrow mode that lifts one weak line next to a tone is a tone, not a path.
@@ -1250,15 +1256,7 @@ pub fn calibrate(
         fingerprint(member, &mut mask);
         let fo = sensor_model(&sim.spectrum(&cands[o].params)?, &r, &cands[o].sensor);
         let fp = sensor_model(&sim.spectrum(&cands[pair].params)?, &r, &cands[pair].sensor);
-        let (mut tot, mut inside) = (0.0, 0.0);
-        for j in 0..r.len() {
-            let d = (m[j] - fo[j]).powi(2) - (m[j] - fp[j]).powi(2);
-            tot += d;
-            if mask[j] {
-                inside += d;
-            }
-        }
-        Ok(tot > 0.0 && inside / tot >= SUPPORT_SHARE)
+        Ok(improvement_share(&m, &fo, &fp, &mask) >= SUPPORT_SHARE)
     };
     let margin_of = |c: &Fitted| {
         if c.effects.iter().any(|e| e.name == TOOTH_DAMAGE) {
