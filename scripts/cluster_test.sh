@@ -9,8 +9,9 @@
 #   3 lease     (same cluster) the receiver holds deliveries; the replica holding one is
 #               SIGKILLed and kept down: another replica delivers what it had claimed once
 #               the lease (2 × 10 s attempt timeout + 1 s) runs out;
-#   4 kill9     at least KILL_RECORDS records (and until the kills are done) through nginx from 6 clients that re-send with the same
-#               Idempotency-Key until answered, while replicas are SIGKILLed KILLS times
+#   4 kill9     at least KILL_RECORDS records (more, until the kills are done) through nginx
+#               from 6 clients that re-send with the same Idempotency-Key until answered,
+#               while replicas are SIGKILLed KILLS times
 #               (cluster.sh restarts them): every acknowledged record stored once, what nginx
 #               did with the requests, the restarted replicas serving again;
 #   5 scale     examples/loadgen through nginx with 1 and with 2 replicas (closed loop,
