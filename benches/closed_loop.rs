@@ -40,14 +40,35 @@
 //! RMS about the mean difference, so that a level change alone does not count). A pair's
 //! members are judged one at a time the same way (the record against the same record without
 //! that member, the other kept): `member_visible`.
+//!
+//! That one-draw measure is a coin toss for a small effect wherever the model is chaotic: any
+//! change of the model, however small, sends the trajectory elsewhere, so "the same record
+//! without the effect" is in effect another draw, and `v_effect ≈ v_noise` either way. Session 12
+//! measured this (`CL_EFFECT_SCALE`, below) and added the **K-draw measure**, now the primary
+//! one (`visible_k`): K = `CL_VIS_DRAWS` (default 4) records with the effect (the record itself
+//! and K − 1 other seeds) and K without it (K other seeds), log spectra on the same grid; with
+//! `D = std(mean_with − mean_without)` and `s²` the per-point variance between draws, pooled
+//! over both sets and averaged over the grid, the effect's own change is
+//! `d = sqrt(max(0, D² − (2/K) s²))` (the part of D the draws' scatter does not explain), and
+//! the record is visible when `d > √2 s`: the effect changes the expected spectrum by more than
+//! two records of the same gearbox differ (the one-draw measure's threshold where it works, a
+//! periodic model with the same seeds). Rows carry `vis_d`, `vis_s`, `visible_k` and a pair's
+//! `member_visible_k`; the report gives every visibility figure under both measures.
+//!
+//! `CL_EFFECT_SCALE=x` scales every drawn effect (resonance peak gain, modulation depth,
+//! planetary error above the baseline, stiffness loss, wander depth, drift; tones, hum and
+//! bursts by 20 log10 x dB): at x = 0.01 no effect should be visible. `CL_VISIBILITY_ONLY=1`
+//! computes the visibility alone (no diagnosis, no closed loop) and prints visible counts per
+//! kind under both measures.
 
 use std::collections::BTreeMap;
+use std::f64::consts::SQRT_2;
 use std::time::Instant;
 
 use gearwear::closed_loop::effects::reference_gears;
 use gearwear::closed_loop::sidebands::SidebandScan;
 use gearwear::closed_loop::spectrum::{BAND_HI, log_spectrum};
-use gearwear::closed_loop::virtual_rig::{RigEffects, RigSpec, generate};
+use gearwear::closed_loop::virtual_rig::{RigEffects, RigSpec, effect_visibility, generate};
 use gearwear::closed_loop::{CalibrateOptions, calibrate};
 use gearwear::signature::{SignatureTable, SplitMix64, mix_seed};
 use rayon::prelude::*;
@@ -90,9 +111,14 @@ struct Row {
     ea: f64,
     omega1: f64,
     snr_db: f64,
+    /// The one-draw measure (module docs) and its two figures.
     visible: bool,
     v_effect: f64,
     v_noise: f64,
+    /// The K-draw measure: `vis_d > √2 vis_s`.
+    visible_k: bool,
+    vis_d: f64,
+    vis_s: f64,
     named: Vec<String>,
     unexplained: usize,
     guesses: Vec<String>,
@@ -139,12 +165,17 @@ struct Row {
     /// A pair's members, each visible on its own (the record against the same record without
     /// that member) or not.
     member_visible: Vec<(String, bool)>,
+    /// The same by the K-draw measure.
+    member_visible_k: Vec<(String, bool)>,
     /// The claimed shaft modulation's / tooth damage's shaft rate over f1.
     named_shaft: Option<f64>,
     /// The report's sideband checks: (shaft, spacing over f1, prominence dB, off the rate,
     /// prominence of the sidebands at the shaft's rate dB).
     sidebands: Vec<(String, f64, f64, bool, f64)>,
 }
+
+/// A pair's members, each with whether it is visible on its own.
+type Members = Vec<(String, bool)>;
 
 fn std_diff(a: &[f64], b: &[f64]) -> f64 {
     let n = a.len().min(b.len()) as f64;
@@ -188,22 +219,24 @@ fn main() {
             let mut e = RigEffects::default();
             let mut truth: Vec<String> = Vec::new();
             let mut size = f64::NAN;
+            let scale: f64 = env("CL_EFFECT_SCALE", 1.0);
+            let db_scale = 20.0 * scale.log10();
             let draw_res = |rng: &mut SplitMix64, e: &mut RigEffects| -> f64 {
                 let rho = 0.2 * (3.0f64 / 0.2).powf(rng.uniform());
                 let q = rng.range(2.0, 30.0);
-                let g = rng.range(1.0, 10.0);
+                let g = scale * rng.range(1.0, 10.0);
                 e.path_peak = Some((rho, 1.0 / (2.0 * q), g));
                 g
             };
             let draw_shaft = |rng: &mut SplitMix64, e: &mut RigEffects| -> f64 {
-                let m = rng.range(0.05, 0.5);
+                let m = scale * rng.range(0.05, 0.5);
                 let gear = &gears[(rng.uniform() < 0.5) as usize];
                 e.eccentricity = Some(m * ea / 2.0);
                 e.eccentricity_shaft = Some(gear.shaft_ratio);
                 m
             };
             let draw_tooth = |rng: &mut SplitMix64, e: &mut RigEffects| -> f64 {
-                let d = rng.range(0.1, 0.8);
+                let d = scale * rng.range(0.1, 0.8);
                 let gear = &gears[(rng.uniform() < 0.5) as usize];
                 e.tooth = Some((gear.shaft_ratio, d));
                 d
@@ -220,6 +253,8 @@ fn main() {
                 }
                 "planetary-wear" => {
                     let p = 0.3 * (5.0f64 / 0.3).powf(rng.uniform());
+                    let base_p = gb.planetary_baseline().unwrap_or(0.0);
+                    let p = base_p + scale * (p - base_p);
                     e.planetary = Some(p);
                     size = p;
                     truth.push("planetary-wear".into());
@@ -240,29 +275,29 @@ fn main() {
                     truth.push("path-resonance".into());
                 }
                 "speed-wander" => {
-                    let d = rng.range(0.002, 0.02);
+                    let d = scale * rng.range(0.002, 0.02);
                     e.speed_wander = Some((d, rng.range(0.003, 0.03)));
                     size = d;
                 }
                 "tone" => {
-                    let lvl = rng.range(-30.0, -5.0);
+                    let lvl = rng.range(-30.0, -5.0) + db_scale;
                     e.tone = Some((rng.range(0.1, 2.4), lvl));
                     e.tone_harmonics = 1 + (rng.uniform() * 3.0) as u32;
                     size = lvl;
                 }
                 "mains-hum" => {
                     let hz = if rng.uniform() < 0.5 { 50.0 } else { 60.0 };
-                    let lvl = rng.range(-35.0, -10.0);
+                    let lvl = rng.range(-35.0, -10.0) + db_scale;
                     e.mains = Some((hz, lvl));
                     size = lvl;
                 }
                 "noise-bursts" => {
-                    let lvl = rng.range(0.0, 10.0);
+                    let lvl = rng.range(0.0, 10.0) + db_scale;
                     e.bursts = Some((2 + (rng.uniform() * 7.0) as u32, lvl));
                     size = lvl;
                 }
                 "gain-drift" => {
-                    let d = rng.range(0.1, 0.5);
+                    let d = scale * rng.range(0.1, 0.5);
                     e.gain_drift = Some(d);
                     size = d;
                 }
@@ -282,6 +317,52 @@ fn main() {
                 // Looking at single records: the draw in full, to turn a record into a test.
                 eprintln!("record {i}: {spec:?}");
             }
+            let blank = |err: Option<String>| Row {
+                kind: kind.into(),
+                truth: truth.clone(),
+                size,
+                ea,
+                omega1,
+                snr_db,
+                visible: false,
+                v_effect: f64::NAN,
+                v_noise: f64::NAN,
+                visible_k: false,
+                vis_d: f64::NAN,
+                vis_s: f64::NAN,
+                named: vec![],
+                unexplained: 0,
+                guesses: vec![],
+                error_before: f64::NAN,
+                error_after: f64::NAN,
+                ea_before: f64::NAN,
+                ea_after: f64::NAN,
+                ea_lower: f64::NAN,
+                ea_upper: f64::NAN,
+                ea_before_lower: f64::NAN,
+                ea_before_upper: f64::NAN,
+                ea_profile: None,
+                ea_refit: None,
+                method: String::new(),
+                rho_ratio: None,
+                zeta_ratio: None,
+                seconds: 0.0,
+                error: err,
+                null_spread: f64::NAN,
+                claim_margin: f64::NAN,
+                null_deviances: vec![],
+                candidates: vec![],
+                fm4: f64::NAN,
+                kurtosis: f64::NAN,
+                tsa_fm4: vec![],
+                speed_std: f64::NAN,
+                wander_rate: e.speed_wander.map(|w| w.1),
+                truth_shaft: e.eccentricity_shaft.or(e.tooth.map(|t| t.0)),
+                member_visible: vec![],
+                member_visible_k: vec![],
+                named_shaft: None,
+                sidebands: vec![],
+            };
             let t = Instant::now();
             let run = || -> Result<Row, String> {
                 let rec = generate(&gb, &spec).map_err(|e| e.to_string())?;
@@ -312,27 +393,69 @@ fn main() {
                         std_diff(&m, &ls(&other.samples)?),
                     )
                 };
-                // A pair's members one at a time: the record against the same record without
-                // that member (the other kept), by the same measure as `visible`.
-                let member_visible: Vec<(String, bool)> = if kind == "pair" {
-                    let mut out = Vec::new();
-                    for name in &truth {
-                        let mut less = e;
-                        if name == "path-resonance" {
-                            less.path_peak = None;
-                        } else {
-                            less.eccentricity = None;
-                            less.eccentricity_shaft = None;
-                            less.tooth = None;
-                        }
-                        let w = generate(&gb, &RigSpec { effects: less, ..spec })
-                            .map_err(|e| e.to_string())?;
-                        out.push((name.clone(), std_diff(&m, &ls(&w.samples)?) > v_noise));
-                    }
-                    out
-                } else {
-                    Vec::new()
+                // The K-draw measure (module docs): K records with the effect (this one and
+                // K − 1 other seeds) against K without it (K other seeds).
+                let k_draws: usize = env("CL_VIS_DRAWS", 4usize).max(2);
+                let draws = |effects: RigEffects, salt: u64| -> Result<Vec<Vec<f64>>, String> {
+                    (0..k_draws)
+                        .into_par_iter()
+                        .map(|j| {
+                            let seed = mix_seed(&[spec.seed, salt, j as u64]);
+                            let r = generate(&gb, &RigSpec { effects, seed, ..spec })
+                                .map_err(|e| e.to_string())?;
+                            ls(&r.samples)
+                        })
+                        .collect()
                 };
+                let (with_k, vis_d, vis_s) = if kind == "clean" {
+                    (Vec::new(), 0.0, 0.0)
+                } else {
+                    let mut with_k = draws(e, 0xD1)?;
+                    with_k[0] = m.clone();
+                    let without_k = draws(RigEffects::default(), 0xD0)?;
+                    let (d, s) = effect_visibility(&with_k, &without_k);
+                    (with_k, d, s)
+                };
+                // A pair's members one at a time: the record against the same record without
+                // that member (the other kept), by both measures.
+                let (member_visible, member_visible_k): (Members, Members) =
+                    if kind == "pair" {
+                        let mut one = Vec::new();
+                        let mut many = Vec::new();
+                        for (idx, name) in truth.iter().enumerate() {
+                            let mut less = e;
+                            if name == "path-resonance" {
+                                less.path_peak = None;
+                            } else {
+                                less.eccentricity = None;
+                                less.eccentricity_shaft = None;
+                                less.tooth = None;
+                            }
+                            let w = generate(&gb, &RigSpec { effects: less, ..spec })
+                                .map_err(|e| e.to_string())?;
+                            one.push((name.clone(), std_diff(&m, &ls(&w.samples)?) > v_noise));
+                            let (d, s) = effect_visibility(&with_k, &draws(less, 0xD2 + idx as u64)?);
+                            many.push((name.clone(), d > SQRT_2 * s));
+                        }
+                        (one, many)
+                    } else {
+                        (Vec::new(), Vec::new())
+                    };
+                let visible_k = kind != "clean" && vis_d > SQRT_2 * vis_s;
+                if std::env::var("CL_VISIBILITY_ONLY").is_ok() {
+                    return Ok(Row {
+                        visible: kind != "clean" && v_effect > v_noise,
+                        v_effect,
+                        v_noise,
+                        visible_k,
+                        vis_d,
+                        vis_s,
+                        member_visible,
+                        member_visible_k,
+                        method: "visibility-only".into(),
+                        ..blank(None)
+                    });
+                }
                 let diag = gearwear::diagnosis::diagnose(&rec, &table, &Default::default()).ok();
                 let ci = diag
                     .as_ref()
@@ -404,6 +527,9 @@ fn main() {
                     visible: kind != "clean" && v_effect > v_noise,
                     v_effect,
                     v_noise,
+                    visible_k,
+                    vis_d,
+                    vis_s,
                     named,
                     unexplained: rep.unexplained.len(),
                     guesses: rep.unexplained.iter().map(|u| u.guess.clone()).collect(),
@@ -445,6 +571,7 @@ fn main() {
                     wander_rate: e.speed_wander.map(|w| w.1),
                     truth_shaft: e.eccentricity_shaft.or(e.tooth.map(|t| t.0)),
                     member_visible,
+                    member_visible_k,
                     named_shaft: rep
                         .effects
                         .iter()
@@ -464,54 +591,15 @@ fn main() {
                         .collect(),
                 })
             };
-            let mut row = run().unwrap_or_else(|err| Row {
-                kind: kind.into(),
-                truth: truth.clone(),
-                size,
-                ea,
-                omega1,
-                snr_db,
-                visible: false,
-                v_effect: f64::NAN,
-                v_noise: f64::NAN,
-                named: vec![],
-                unexplained: 0,
-                guesses: vec![],
-                error_before: f64::NAN,
-                error_after: f64::NAN,
-                ea_before: f64::NAN,
-                ea_after: f64::NAN,
-                ea_lower: f64::NAN,
-                ea_upper: f64::NAN,
-                ea_before_lower: f64::NAN,
-                ea_before_upper: f64::NAN,
-                ea_profile: None,
-                ea_refit: None,
-                method: String::new(),
-                rho_ratio: None,
-                zeta_ratio: None,
-                seconds: 0.0,
-                error: Some(err),
-                null_spread: f64::NAN,
-                claim_margin: f64::NAN,
-                null_deviances: vec![],
-                candidates: vec![],
-                fm4: f64::NAN,
-                kurtosis: f64::NAN,
-                tsa_fm4: vec![],
-                speed_std: f64::NAN,
-                wander_rate: e.speed_wander.map(|w| w.1),
-                truth_shaft: e.eccentricity_shaft.or(e.tooth.map(|t| t.0)),
-                member_visible: vec![],
-                named_shaft: None,
-                sidebands: vec![],
-            });
+            let mut row = run().unwrap_or_else(|err| blank(Some(err)));
             row.seconds = t.elapsed().as_secs_f64();
             eprintln!(
-                "{i:4} {kind:16} truth {:?} named {:?} vis {} err {:.2}->{:.2} ea {:.3} {:.3}->{:.3} [{:.3},{:.3}] {:.1}s null {:.1} margin {:.1} best eligible {:?}{}",
+                "{i:4} {kind:16} truth {:?} named {:?} vis {} (K {}, d/s {:.2}) err {:.2}->{:.2} ea {:.3} {:.3}->{:.3} [{:.3},{:.3}] {:.1}s null {:.1} margin {:.1} best eligible {:?}{}",
                 row.truth,
                 row.named,
                 row.visible,
+                row.visible_k,
+                row.vis_d / row.vis_s,
                 row.error_before,
                 row.error_after,
                 row.ea,
@@ -536,7 +624,41 @@ fn main() {
     if let Ok(p) = std::env::var("CL_OUT") {
         std::fs::write(&p, serde_json::to_string_pretty(&rows).expect("json")).expect("write");
     }
-    report(&rows, n, base, wall);
+    if std::env::var("CL_VISIBILITY_ONLY").is_ok() {
+        report_visibility(&rows, n, base);
+    } else {
+        report(&rows, n, base, wall);
+    }
+}
+
+/// `CL_VISIBILITY_ONLY=1`: visible records per kind under both measures.
+fn report_visibility(rows: &[Row], n: usize, base: u64) {
+    let scale: f64 = env("CL_EFFECT_SCALE", 1.0);
+    println!(
+        "visibility: {n} records, base seed {base}, effect scale {scale}, K = {} draws\n",
+        env("CL_VIS_DRAWS", 4usize).max(2)
+    );
+    println!("| kind | n | visible, one draw | visible, K draws | median d / s |");
+    println!("| --- | --- | --- | --- | --- |");
+    let ok: Vec<&Row> = rows.iter().filter(|r| r.error.is_none()).collect();
+    for kind in KINDS.iter().filter(|k| **k != "clean") {
+        let rs: Vec<&&Row> = ok.iter().filter(|r| r.kind == *kind).collect();
+        if rs.is_empty() {
+            continue;
+        }
+        let mut ratio: Vec<f64> = rs.iter().map(|r| r.vis_d / r.vis_s).collect();
+        ratio.sort_by(f64::total_cmp);
+        println!(
+            "| {kind} | {} | {} | {} | {:.2} |",
+            rs.len(),
+            pct(rs.iter().filter(|r| r.visible).count(), rs.len()),
+            pct(rs.iter().filter(|r| r.visible_k).count(), rs.len()),
+            ratio[ratio.len() / 2]
+        );
+    }
+    for r in rows.iter().filter(|r| r.error.is_some()) {
+        println!("failed: {} {:?}", r.kind, r.error);
+    }
 }
 
 fn pct(a: usize, b: usize) -> String {
@@ -590,6 +712,10 @@ fn report(rows: &[Row], n: usize, base: u64, wall: f64) {
     // Targets.
     let lib_vis: Vec<&&Row> = ok
         .iter()
+        .filter(|r| library(&r.kind) && r.visible_k)
+        .collect();
+    let lib_vis1: Vec<&&Row> = ok
+        .iter()
         .filter(|r| library(&r.kind) && r.visible)
         .collect();
     let named_right = |r: &Row| {
@@ -604,7 +730,8 @@ fn report(rows: &[Row], n: usize, base: u64, wall: f64) {
         .iter()
         .filter(|r| !library(&r.kind) && r.kind != "clean")
         .collect();
-    let non_ok = |r: &Row| r.named.is_empty() && (r.unexplained > 0 || !r.visible);
+    let non_ok = |r: &Row| r.named.is_empty() && (r.unexplained > 0 || !r.visible_k);
+    let non_ok1 = |r: &Row| r.named.is_empty() && (r.unexplained > 0 || !r.visible);
     let clean: Vec<&&Row> = ok.iter().filter(|r| r.kind == "clean").collect();
     let err_ok = ok
         .iter()
@@ -622,10 +749,75 @@ fn report(rows: &[Row], n: usize, base: u64, wall: f64) {
     println!("| target | measured | issue's target |");
     println!("| --- | --- | --- |");
     println!(
-        "| library effect named exactly (visible records) | {} | ≥ 90 % |",
+        "| library effect named exactly (visible records, K-draw measure) | {} | ≥ 90 % |",
         pct(
             lib_vis.iter().filter(|r| named_right(r)).count(),
             lib_vis.len()
+        )
+    );
+    println!(
+        "| library effect named exactly (visible records, one-draw measure) | {} | — |",
+        pct(
+            lib_vis1.iter().filter(|r| named_right(r)).count(),
+            lib_vis1.len()
+        )
+    );
+    // Effect by effect (the issue's target reads "a library effect named in ≥ 90 % of records
+    // where it changes the spectrum by more than the noise"): a single effect when its record is
+    // visible, each pair member when visible on its own (K-draw measure); and, over the records
+    // holding at least one such effect, the answer names all of them and nothing else.
+    let visible_effects = |r: &Row| -> Vec<String> {
+        if r.kind == "pair" {
+            r.member_visible_k
+                .iter()
+                .filter(|m| m.1)
+                .map(|m| m.0.clone())
+                .collect()
+        } else if r.visible_k {
+            r.truth.clone()
+        } else {
+            Vec::new()
+        }
+    };
+    let effects: Vec<bool> = lib_all
+        .iter()
+        .flat_map(|r| {
+            visible_effects(r)
+                .into_iter()
+                .map(|v| r.named.contains(&v))
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    println!(
+        "| visible library effects named, effect by effect (K-draw measure; pair members on their own) | {} | ≥ 90 % |",
+        pct(effects.iter().filter(|b| **b).count(), effects.len())
+    );
+    let with_visible: Vec<&&Row> = lib_all
+        .iter()
+        .copied()
+        .filter(|r| !visible_effects(r).is_empty())
+        .collect();
+    println!(
+        "| … records with a visible effect: all visible effects named and nothing outside the truth | {} | — |",
+        pct(
+            with_visible
+                .iter()
+                .filter(|r| {
+                    visible_effects(r).iter().all(|v| r.named.contains(v))
+                        && r.named.iter().all(|x| r.truth.contains(x))
+                })
+                .count(),
+            with_visible.len()
+        )
+    );
+    println!(
+        "| library records with an effect claimed that is not in the truth | {} | — |",
+        pct(
+            lib_all
+                .iter()
+                .filter(|r| r.named.iter().any(|x| !r.truth.contains(x)))
+                .count(),
+            lib_all.len()
         )
     );
     println!(
@@ -636,38 +828,48 @@ fn report(rows: &[Row], n: usize, base: u64, wall: f64) {
         )
     );
     // Pairs member by member: each member that is visible on its own, named or not.
-    let members: Vec<(bool, bool)> = rows
-        .iter()
-        .filter(|r| r.kind == "pair")
-        .flat_map(|r| {
-            r.member_visible
-                .iter()
-                .map(|(n, v)| (*v, r.named.contains(n)))
-                .collect::<Vec<_>>()
-        })
-        .collect();
+    for (label, k_draws) in [("K-draw", true), ("one-draw", false)] {
+        let members: Vec<(bool, bool)> = ok
+            .iter()
+            .filter(|r| r.kind == "pair")
+            .flat_map(|r| {
+                let vis = if k_draws {
+                    &r.member_visible_k
+                } else {
+                    &r.member_visible
+                };
+                vis.iter()
+                    .map(|(n, v)| (*v, r.named.contains(n)))
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+        println!(
+            "| pair members visible on their own ({label} measure): named | {} | — |",
+            pct(
+                members.iter().filter(|m| m.0 && m.1).count(),
+                members.iter().filter(|m| m.0).count()
+            )
+        );
+    }
     println!(
-        "| pair members visible on their own: named | {} | — |",
-        pct(
-            members.iter().filter(|m| m.0 && m.1).count(),
-            members.iter().filter(|m| m.0).count()
-        )
+        "| non-library effect: no library effect claimed and (unexplained reported or not visible, K-draw measure) | {} | ≥ 80 % |",
+        pct(non.iter().filter(|r| non_ok(r)).count(), non.len())
     );
     println!(
-        "| non-library effect: no library effect claimed and (unexplained reported or not visible) | {} | ≥ 80 % |",
-        pct(non.iter().filter(|r| non_ok(r)).count(), non.len())
+        "| non-library effect: no library effect claimed and (unexplained reported or not visible, one-draw measure) | {} | — |",
+        pct(non.iter().filter(|r| non_ok1(r)).count(), non.len())
     );
     println!(
         "| non-library effect: no library effect claimed | {} | — |",
         pct(non.iter().filter(|r| r.named.is_empty()).count(), non.len())
     );
     println!(
-        "| non-library effect, visible: unexplained reported and nothing claimed | {} | — |",
+        "| non-library effect, visible (K-draw measure): unexplained reported and nothing claimed | {} | — |",
         pct(
             non.iter()
-                .filter(|r| r.visible && r.named.is_empty() && r.unexplained > 0)
+                .filter(|r| r.visible_k && r.named.is_empty() && r.unexplained > 0)
                 .count(),
-            non.iter().filter(|r| r.visible).count()
+            non.iter().filter(|r| r.visible_k).count()
         )
     );
     println!(
@@ -692,7 +894,7 @@ fn report(rows: &[Row], n: usize, base: u64, wall: f64) {
     println!();
     // Per kind: error and wear before/after, interval coverage.
     println!(
-        "| kind | n | visible | named exactly | error before → after (dB, median) | wear MAE before → after | 90 % interval covers ea (before / after) | after interval width (median) |"
+        "| kind | n | visible (K draws / one draw) | named exactly | error before → after (dB, median) | wear MAE before → after | 90 % interval covers ea (before / after) | after interval width (median) |"
     );
     println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
     let median = |mut v: Vec<f64>| -> f64 {
@@ -725,7 +927,11 @@ fn report(rows: &[Row], n: usize, base: u64, wall: f64) {
             if kind == "clean" {
                 "—".into()
             } else {
-                rs.iter().filter(|r| r.visible).count().to_string()
+                format!(
+                    "{} / {}",
+                    rs.iter().filter(|r| r.visible_k).count(),
+                    rs.iter().filter(|r| r.visible).count()
+                )
             },
             if library(kind) {
                 rs.iter().filter(|r| named_right(r)).count().to_string()
@@ -744,7 +950,7 @@ fn report(rows: &[Row], n: usize, base: u64, wall: f64) {
     println!();
     // Per effect size: library kinds in three bins of their size measure.
     println!(
-        "| kind | size measure | bin | n | visible | named exactly | named exactly when visible |"
+        "| kind | size measure | bin | n | visible (K draws) | named exactly | named exactly when visible |"
     );
     println!("| --- | --- | --- | --- | --- | --- | --- |");
     let measures: BTreeMap<&str, &str> = [
@@ -771,7 +977,7 @@ fn report(rows: &[Row], n: usize, base: u64, wall: f64) {
             if part.is_empty() {
                 continue;
             }
-            let vis: Vec<&&&Row> = part.iter().filter(|r| r.visible).collect();
+            let vis: Vec<&&&Row> = part.iter().filter(|r| r.visible_k).collect();
             let right = |r: &Row| {
                 if library(kind) {
                     named_right(r)

@@ -266,3 +266,100 @@ fn biquad_resonance(x: &mut [f64], fs: f64, fr: f64, zeta: f64) {
         *v = y0;
     }
 }
+
+/// Whether an effect is visible in a record, from K records with it and K without it (other
+/// seeds: other initial states and noise), each a log spectrum on one grid (dB).
+///
+/// Returns `(d, s)`: `s²` is the per-point variance between the draws, pooled over both sets
+/// and averaged over the grid (one record's scatter), and
+/// `d = sqrt(max(0, D² − (1/K_with + 1/K_without) s²))` with
+/// `D = std_j(mean_with_j − mean_without_j)` (the RMS about the mean difference, so that a level
+/// change alone does not count): the effect's change of the expected spectrum, less the part the
+/// draws' scatter explains. The benchmark calls an effect visible when `d > √2 s`, i.e. it
+/// changes the spectrum by more than two records of the same gearbox differ. Unlike a
+/// comparison of one record with and without the effect, this does not depend on the draw: in a
+/// chaotic model any change, however small, sends the trajectory elsewhere.
+///
+/// Both sets need at least two spectra of one length.
+pub fn effect_visibility(with: &[Vec<f64>], without: &[Vec<f64>]) -> (f64, f64) {
+    let mean = |set: &[Vec<f64>]| -> Vec<f64> {
+        let k = set.len() as f64;
+        (0..set[0].len())
+            .map(|j| set.iter().map(|v| v[j]).sum::<f64>() / k)
+            .collect()
+    };
+    let var = |set: &[Vec<f64>], mu: &[f64]| -> f64 {
+        let k = set.len() as f64;
+        mu.iter()
+            .enumerate()
+            .map(|(j, m)| set.iter().map(|v| (v[j] - m).powi(2)).sum::<f64>() / (k - 1.0))
+            .sum::<f64>()
+            / mu.len() as f64
+    };
+    let (mw, mo) = (mean(with), mean(without));
+    let s2 = 0.5 * (var(with, &mw) + var(without, &mo));
+    let diff: Vec<f64> = mw.iter().zip(&mo).map(|(a, b)| a - b).collect();
+    let n = diff.len() as f64;
+    let dm = diff.iter().sum::<f64>() / n;
+    let big_d2 = diff.iter().map(|v| (v - dm).powi(2)).sum::<f64>() / n;
+    let d2 = big_d2 - s2 * (1.0 / with.len() as f64 + 1.0 / without.len() as f64);
+    (d2.max(0.0).sqrt(), s2.sqrt())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `k` draws of `base + pattern + N(0, sigma²)` per point (Box–Muller on SplitMix64).
+    fn draws(k: usize, pattern: &[f64], sigma: f64, seed: u64) -> Vec<Vec<f64>> {
+        let mut rng = SplitMix64::new(seed);
+        (0..k)
+            .map(|_| {
+                pattern
+                    .iter()
+                    .map(|p| {
+                        let (u1, u2) = (rng.uniform().max(1e-300), rng.uniform());
+                        p + sigma * (-2.0 * u1.ln()).sqrt() * (TAU * u2).cos()
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_same_spectrum_with_scatter_is_not_an_effect() {
+        let flat = vec![-40.0; 314];
+        // Pure scatter: the corrected d is small against s, however large the scatter.
+        for (seed, sigma) in [(1, 1.0), (2, 3.0), (3, 8.0)] {
+            let (d, s) = effect_visibility(
+                &draws(4, &flat, sigma, seed),
+                &draws(4, &flat, sigma, seed + 100),
+            );
+            assert!((s / sigma - 1.0).abs() < 0.1, "s {s} for sigma {sigma}");
+            assert!(d < 0.35 * s, "d {d} s {s}: scatter taken for an effect");
+        }
+    }
+
+    #[test]
+    fn a_shape_change_is_measured_and_a_level_change_is_not() {
+        let flat = vec![-40.0; 314];
+        // A raised band of 6 dB over a fifth of the grid: RMS about its mean = 6·sqrt(0.2·0.8).
+        let band: Vec<f64> = (0..314)
+            .map(|j| {
+                if (100..163).contains(&j) {
+                    -34.0
+                } else {
+                    -40.0
+                }
+            })
+            .collect();
+        let (d, s) = effect_visibility(&draws(6, &band, 1.0, 7), &draws(6, &flat, 1.0, 8));
+        let truth = 6.0 * (0.2f64 * 0.8).sqrt();
+        assert!((d - truth).abs() < 0.15 * truth, "d {d} for {truth}");
+        assert!(d > std::f64::consts::SQRT_2 * s);
+        // The whole spectrum 10 dB higher: a level change only.
+        let up: Vec<f64> = flat.iter().map(|v| v + 10.0).collect();
+        let (d, s) = effect_visibility(&draws(4, &up, 1.0, 9), &draws(4, &flat, 1.0, 10));
+        assert!(d < 0.35 * s, "a level change counted: d {d} s {s}");
+    }
+}
