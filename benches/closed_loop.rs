@@ -13,7 +13,8 @@
 //! loop's answer, and `ea_refit`, `ea_profile`, `method` (the wear refit, the profile's vertex,
 //! `wear_after`'s method); `wander_rate`, `truth_shaft`, `named_shaft`, the report's
 //! `sidebands` and a pair's `member_visible`. `CL_INDICES=3,17` runs only those records of the
-//! set (same draws) and prints each one's `RigSpec`.
+//! set (same draws) and prints each one's `RigSpec`. `CL_SEEDS=18,19` runs `CL_N` records of
+//! each base seed in one run with one report (rows carry `seed` and `index`).
 //!
 //! Every record: ea ~ U[0.1, 1], Ω1 ~ U over the table's band, gain log-uniform 1e-2 … 1e2,
 //! white noise at SNR ~ U[20, 30] dB, 16 kHz, 0.6 s, random initial state. Kinds cycle in a fixed
@@ -103,6 +104,9 @@ fn library(kind: &str) -> bool {
 
 #[derive(Debug, Clone, serde::Serialize)]
 struct Row {
+    /// The record's base seed and index in its set (`CL_SEED`, `CL_INDICES`).
+    seed: u64,
+    index: usize,
     kind: String,
     truth: Vec<String>,
     /// The effect's size measure (resonance peak gain, modulation depth, planetary error,
@@ -186,7 +190,13 @@ fn std_diff(a: &[f64], b: &[f64]) -> f64 {
 
 fn main() {
     let n: usize = env("CL_N", 110);
-    let base: u64 = env("CL_SEED", 2);
+    // `CL_SEEDS=18,19`: several base seeds in one run (n records each, one report, rows tagged
+    // with their seed); otherwise `CL_SEED` alone.
+    let seeds: Vec<u64> = std::env::var("CL_SEEDS")
+        .ok()
+        .map(|v| v.split(',').filter_map(|s| s.trim().parse().ok()).collect())
+        .filter(|v: &Vec<u64>| !v.is_empty())
+        .unwrap_or_else(|| vec![env("CL_SEED", 2)]);
     let only: String = env("CL_KINDS", String::new());
     let kinds: Vec<&str> = KINDS
         .iter()
@@ -205,11 +215,16 @@ fn main() {
         .split(',')
         .filter_map(|v| v.trim().parse().ok())
         .collect();
-    let rows: Vec<Row> = (0..n)
-        .filter(|i| indices.is_empty() || indices.contains(i))
-        .collect::<Vec<usize>>()
+    let rows: Vec<Row> = seeds
+        .iter()
+        .flat_map(|&base| {
+            (0..n)
+                .filter(|i| indices.is_empty() || indices.contains(i))
+                .map(move |i| (base, i))
+        })
+        .collect::<Vec<(u64, usize)>>()
         .into_par_iter()
-        .map(|i| {
+        .map(|(base, i)| {
             let kind = kinds[i % kinds.len()];
             let mut rng = SplitMix64::new(mix_seed(&[base, i as u64, 0xC1_05ED]));
             let ea = rng.range(0.1, 1.0);
@@ -318,6 +333,8 @@ fn main() {
                 eprintln!("record {i}: {spec:?}");
             }
             let blank = |err: Option<String>| Row {
+                seed: base,
+                index: i,
                 kind: kind.into(),
                 truth: truth.clone(),
                 size,
@@ -518,6 +535,8 @@ fn main() {
                     _ => (None, None),
                 };
                 Ok(Row {
+                    seed: base,
+                    index: i,
                     kind: kind.into(),
                     truth: truth.clone(),
                     size,
@@ -594,7 +613,7 @@ fn main() {
             let mut row = run().unwrap_or_else(|err| blank(Some(err)));
             row.seconds = t.elapsed().as_secs_f64();
             eprintln!(
-                "{i:4} {kind:16} truth {:?} named {:?} vis {} (K {}, d/s {:.2}) err {:.2}->{:.2} ea {:.3} {:.3}->{:.3} [{:.3},{:.3}] {:.1}s null {:.1} margin {:.1} best eligible {:?}{}",
+                "{base}:{i:<4} {kind:16} truth {:?} named {:?} vis {} (K {}, d/s {:.2}) err {:.2}->{:.2} ea {:.3} {:.3}->{:.3} [{:.3},{:.3}] {:.1}s null {:.1} margin {:.1} best eligible {:?}{}",
                 row.truth,
                 row.named,
                 row.visible,
@@ -625,17 +644,17 @@ fn main() {
         std::fs::write(&p, serde_json::to_string_pretty(&rows).expect("json")).expect("write");
     }
     if std::env::var("CL_VISIBILITY_ONLY").is_ok() {
-        report_visibility(&rows, n, base);
+        report_visibility(&rows, n, &seeds);
     } else {
-        report(&rows, n, base, wall);
+        report(&rows, n, &seeds, wall);
     }
 }
 
 /// `CL_VISIBILITY_ONLY=1`: visible records per kind under both measures.
-fn report_visibility(rows: &[Row], n: usize, base: u64) {
+fn report_visibility(rows: &[Row], n: usize, seeds: &[u64]) {
     let scale: f64 = env("CL_EFFECT_SCALE", 1.0);
     println!(
-        "visibility: {n} records, base seed {base}, effect scale {scale}, K = {} draws\n",
+        "visibility: {n} records a seed, base seeds {seeds:?}, effect scale {scale}, K = {} draws\n",
         env("CL_VIS_DRAWS", 4usize).max(2)
     );
     println!("| kind | n | visible, one draw | visible, K draws | median d / s |");
@@ -669,10 +688,10 @@ fn pct(a: usize, b: usize) -> String {
     }
 }
 
-fn report(rows: &[Row], n: usize, base: u64, wall: f64) {
+fn report(rows: &[Row], n: usize, seeds: &[u64], wall: f64) {
     let ok: Vec<&Row> = rows.iter().filter(|r| r.error.is_none()).collect();
     println!(
-        "closed-loop benchmark: {n} records, base seed {base}, {} failed, wall {:.0} s, mean {:.1} s a record (one thread)\n",
+        "closed-loop benchmark: {n} records a seed, base seeds {seeds:?}, {} failed, wall {:.0} s, mean {:.1} s a record (one thread)\n",
         rows.len() - ok.len(),
         wall,
         ok.iter().map(|r| r.seconds).sum::<f64>() / ok.len().max(1) as f64
