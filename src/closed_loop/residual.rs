@@ -3,7 +3,8 @@
 //!
 //! The guesses, in order (the first that applies):
 //! 1. **Mains pickup**: two or more `extra` lines within tolerance of odd multiples of 50 Hz
-//!    (or of 60 Hz), or one such line at 50/60/150/180 Hz: "electrical pickup".
+//!    (or of 60 Hz), one of them at × 1, 3, 5 or 7, or one such line at 50/60/150/180 Hz:
+//!    "electrical pickup".
 //! 2. **Sidebands off every shaft's rate**: when the record's sidebands were measured off a
 //!    shaft's rate ([`super::sidebands`], spacing `δ`), an extra line within 0.75 grid step of
 //!    `a f1 ± n δ` (a = 1, 2; n = 1…3), unless `δ` lies within 0.75 record bin of 1–3 times a
@@ -83,6 +84,9 @@ pub(crate) fn fingerprint_gap(
     (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
 }
 
+/// The highest odd mains harmonic that can anchor a mains series (see [`annotate`]).
+pub const MAINS_LOW_HARMONIC: u32 = 7;
+
 /// Fill `guess` of every feature (see the module docs). `f1` in Hz.
 pub(crate) fn annotate(
     features: &mut [ResidualFeature],
@@ -114,8 +118,12 @@ pub(crate) fn annotate(
             .filter_map(|&i| near(features[i].frequency_hz).map(|k| (i, k)))
             .filter(|(i, _)| features[*i].guess.is_empty())
             .collect();
+        // Pickup is strongest at the low odd harmonics: a series needs one at × 1–7 (with a
+        // grid tolerance of ±1.5 f1/128 ≈ ±10 Hz, odd multiples of 50 Hz lie 100 Hz apart,
+        // and two of several unrelated lines high up the series fall on them by chance).
+        let low = hits.iter().any(|(_, k)| *k <= MAINS_LOW_HARMONIC);
         let strong_single = hits.len() == 1 && hits[0].1 <= 3;
-        if hits.len() >= 2 || strong_single {
+        if (hits.len() >= 2 && low) || strong_single {
             let ks: Vec<String> = hits.iter().map(|(_, k)| k.to_string()).collect();
             for (i, k) in &hits {
                 features[*i].guess = format!(

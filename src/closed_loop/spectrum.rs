@@ -7,7 +7,14 @@
 //!
 //! `r_j = BAND_LO + j / GRID_PERIODS`, `j = 0, 1, …` while `r_j ≤ BAND_HI`
 //!
-//! (`r = f / f1`), by linear interpolation of `20 log10 A` between the two neighbouring bins.
+//! (`r = f / f1`), by linear interpolation of the amplitude `A` between the two neighbouring
+//! bins, then `20 log10`. (Until session 12 the interpolation was of `20 log10 A`: a grid point
+//! 0.4 bin past a bin-centred line's last non-zero bin then read the empty bin's −6000 dB
+//! floor for 40 %, so a simulated line — exactly on a bin, nothing in the bins beyond ±1 — ended
+//! one grid point early while a measured one, never exactly on a bin and with noise around it,
+//! did not. Every line's skirt then read as an "extra" line 1.4–1.6 grid steps either side on
+//! clean records, at f1 ± the 100-tooth gear's shaft rate, and a damaged tooth on that gear —
+//! sidebands at ±1.28 grid steps — fitted the artefact.)
 //! The grid step equals the bin spacing, `f1 / GRID_PERIODS`: with 128 periods the input-shaft
 //! sidebands `f1 ± f1/29` sit 4.4 bins from the mesh line and are resolved.
 //!
@@ -53,18 +60,14 @@ pub fn log_spectrum(x: &[f64], fs: f64, f1: f64) -> Result<Vec<f64>> {
     }
     let s = welch(x, fs, len, 0.5, Window::Hann)?;
     let res = s.resolution();
-    let db: Vec<f64> = s
-        .amplitude
-        .iter()
-        .map(|a| 20.0 * a.max(1e-300).log10())
-        .collect();
+    let a = &s.amplitude;
     Ok(grid()
         .iter()
         .map(|r| {
             let pos = r * f1 / res;
-            let i = (pos.floor() as usize).min(db.len() - 2);
+            let i = (pos.floor() as usize).min(a.len() - 2);
             let u = (pos - i as f64).clamp(0.0, 1.0);
-            db[i] * (1.0 - u) + db[i + 1] * u
+            20.0 * (a[i] * (1.0 - u) + a[i + 1] * u).max(1e-300).log10()
         })
         .collect())
 }
@@ -96,4 +99,44 @@ pub fn running_median(v: &[f64], half: usize) -> Vec<f64> {
             w[w.len() / 2]
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The grid value 1.4 bins beside a line (the grid sits 0.4 bin past the bins, `BAND_LO`)
+    /// must not depend on whether the line is exactly on a bin: a simulated line is, a measured
+    /// one never is. Interpolating in dB, the bin-centred line read ≈ 1000 dB lower there.
+    #[test]
+    fn a_lines_skirt_reads_the_same_on_and_off_a_bin() {
+        let f1 = 1.0;
+        let fs = 32.0;
+        let n = 4096 * 3;
+        let tone = |f: f64| -> Vec<f64> {
+            (0..n)
+                .map(|k| (std::f64::consts::TAU * f * k as f64 / fs).sin())
+                .collect()
+        };
+        let on = log_spectrum(&tone(1.0), fs, f1).unwrap();
+        // 0.05 bin off, with a −80 dB floor of tiny tones elsewhere (a measured record's noise).
+        let mut off = tone(1.0 + 0.05 / GRID_PERIODS);
+        for (k, v) in off.iter_mut().enumerate() {
+            *v += 1e-4 * (std::f64::consts::TAU * 0.31 * k as f64 / fs).sin();
+        }
+        let off = log_spectrum(&off, fs, f1).unwrap();
+        let j = grid_index(1.0).unwrap();
+        // The four grid points a bin-centred Hann line reaches (bins 127–129 of 128 periods).
+        for k in [j - 2, j - 1, j, j + 1] {
+            assert!(
+                (on[k] - off[k]).abs() < 3.0,
+                "grid point {k} (r = {:.4}): {:.1} dB on a bin, {:.1} dB off it",
+                grid()[k],
+                on[k],
+                off[k]
+            );
+        }
+        // The line itself reads within the Hann scalloping of its amplitude (1, 0 dB).
+        assert!(on[j].max(on[j + 1]) > -3.5 && on[j].max(on[j + 1]) < 0.1);
+    }
 }
