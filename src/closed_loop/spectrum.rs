@@ -9,8 +9,8 @@
 //!
 //! (`r = f / f1`), by linear interpolation of the amplitude `A` between the two neighbouring
 //! bins, then `20 log10`. (Until session 12 the interpolation was of `20 log10 A`: a grid point
-//! 0.4 bin past a bin-centred line's last non-zero bin then read the empty bin's −6000 dB
-//! floor for 40 %, so a simulated line — exactly on a bin, nothing in the bins beyond ±1 — ended
+//! 0.4 bin past a bin-centred line's last non-zero bin then took 40 % of the nearly empty next
+//! bin's dB value (the grid point read −184 dB in the test below), so a simulated line — exactly on a bin, nothing in the bins beyond ±1 — ended
 //! one grid point early while a measured one, never exactly on a bin and with noise around it,
 //! did not. Every line's skirt then read as an "extra" line 1.4–1.6 grid steps either side on
 //! clean records, at f1 ± the 100-tooth gear's shaft rate, and a damaged tooth on that gear —
@@ -107,7 +107,8 @@ mod tests {
 
     /// The grid value 1.4 bins beside a line (the grid sits 0.4 bin past the bins, `BAND_LO`)
     /// must not depend on whether the line is exactly on a bin: a simulated line is, a measured
-    /// one never is. Interpolating in dB, the bin-centred line read ≈ 1000 dB lower there.
+    /// one never is. Interpolating in dB, the bin-centred line read −184 dB against −28 dB at
+    /// r = 0.9875.
     #[test]
     fn a_lines_skirt_reads_the_same_on_and_off_a_bin() {
         let f1 = 1.0;
@@ -136,7 +137,7 @@ mod tests {
                 off[k]
             );
         }
-        // The line itself reads within the Hann scalloping of its amplitude (1, 0 dB).
+        // The line itself reads within the Hann scalloping of its amplitude (1, i.e. 0 dB).
         assert!(on[j].max(on[j + 1]) > -3.5 && on[j].max(on[j + 1]) < 0.1);
     }
 }
