@@ -458,19 +458,22 @@ fn main() {
                     } else {
                         (Vec::new(), Vec::new())
                     };
-                let visible_k = kind != "clean" && vis_d > SQRT_2 * vis_s;
+                // The row's draw and visibility, shared by both answers below.
+                let seen = Row {
+                    visible: kind != "clean" && v_effect > v_noise,
+                    v_effect,
+                    v_noise,
+                    visible_k: kind != "clean" && vis_d > SQRT_2 * vis_s,
+                    vis_d,
+                    vis_s,
+                    member_visible,
+                    member_visible_k,
+                    ..blank(None)
+                };
                 if std::env::var("CL_VISIBILITY_ONLY").is_ok() {
                     return Ok(Row {
-                        visible: kind != "clean" && v_effect > v_noise,
-                        v_effect,
-                        v_noise,
-                        visible_k,
-                        vis_d,
-                        vis_s,
-                        member_visible,
-                        member_visible_k,
                         method: "visibility-only".into(),
-                        ..blank(None)
+                        ..seen
                     });
                 }
                 let diag = gearwear::diagnosis::diagnose(&rec, &table, &Default::default()).ok();
@@ -511,7 +514,8 @@ fn main() {
                         })
                         .unwrap_or_default();
                     return Err(format!(
-                        "indicators only: members visible {member_visible:?} sidebands {sb:?} fm4 {:.3} kurtosis {:.3} tooth {:?} wander {:?} visible {} tsa {:?} speed_std {:.6}",
+                        "indicators only: members visible {:?} sidebands {sb:?} fm4 {:.3} kurtosis {:.3} tooth {:?} wander {:?} visible {} tsa {:?} speed_std {:.6}",
+                        seen.member_visible,
                         ci.0,
                         ci.1,
                         e.tooth,
@@ -535,20 +539,6 @@ fn main() {
                     _ => (None, None),
                 };
                 Ok(Row {
-                    seed: base,
-                    index: i,
-                    kind: kind.into(),
-                    truth: truth.clone(),
-                    size,
-                    ea,
-                    omega1,
-                    snr_db,
-                    visible: kind != "clean" && v_effect > v_noise,
-                    v_effect,
-                    v_noise,
-                    visible_k,
-                    vis_d,
-                    vis_s,
                     named,
                     unexplained: rep.unexplained.len(),
                     guesses: rep.unexplained.iter().map(|u| u.guess.clone()).collect(),
@@ -587,10 +577,6 @@ fn main() {
                     kurtosis: ci.1,
                     tsa_fm4,
                     speed_std,
-                    wander_rate: e.speed_wander.map(|w| w.1),
-                    truth_shaft: e.eccentricity_shaft.or(e.tooth.map(|t| t.0)),
-                    member_visible,
-                    member_visible_k,
                     named_shaft: rep
                         .effects
                         .iter()
@@ -608,6 +594,7 @@ fn main() {
                             )
                         })
                         .collect(),
+                    ..seen
                 })
             };
             let mut row = run().unwrap_or_else(|err| blank(Some(err)));
