@@ -69,7 +69,9 @@ use std::time::Instant;
 use gearwear::closed_loop::effects::reference_gears;
 use gearwear::closed_loop::sidebands::SidebandScan;
 use gearwear::closed_loop::spectrum::{BAND_HI, log_spectrum};
-use gearwear::closed_loop::virtual_rig::{RigEffects, RigSpec, effect_visibility, generate};
+use gearwear::closed_loop::virtual_rig::{
+    RigEffects, RigSpec, effect_visibility, generate, spread_of_difference,
+};
 use gearwear::closed_loop::{CalibrateOptions, calibrate};
 use gearwear::signature::{SignatureTable, SplitMix64, mix_seed};
 use rayon::prelude::*;
@@ -181,13 +183,6 @@ struct Row {
 /// A pair's members, each with whether it is visible on its own.
 type Members = Vec<(String, bool)>;
 
-fn std_diff(a: &[f64], b: &[f64]) -> f64 {
-    let n = a.len().min(b.len()) as f64;
-    let d: Vec<f64> = a.iter().zip(b).map(|(x, y)| x - y).collect();
-    let mean = d.iter().sum::<f64>() / n;
-    (d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt()
-}
-
 fn main() {
     let n: usize = env("CL_N", 110);
     // `CL_SEEDS=18,19`: several base seeds in one run (n records each, one report, rows tagged
@@ -197,6 +192,10 @@ fn main() {
         .map(|v| v.split(',').filter_map(|s| s.trim().parse().ok()).collect())
         .filter(|v: &Vec<u64>| !v.is_empty())
         .unwrap_or_else(|| vec![env("CL_SEED", 2)]);
+    // `CL_EFFECT_SCALE` (every drawn effect scaled) and `CL_VIS_DRAWS` (K): module docs.
+    let scale: f64 = env("CL_EFFECT_SCALE", 1.0);
+    let db_scale = 20.0 * scale.log10();
+    let k_draws: usize = env("CL_VIS_DRAWS", 4usize).max(2);
     let only: String = env("CL_KINDS", String::new());
     let kinds: Vec<&str> = KINDS
         .iter()
@@ -234,8 +233,6 @@ fn main() {
             let mut e = RigEffects::default();
             let mut truth: Vec<String> = Vec::new();
             let mut size = f64::NAN;
-            let scale: f64 = env("CL_EFFECT_SCALE", 1.0);
-            let db_scale = 20.0 * scale.log10();
             let draw_res = |rng: &mut SplitMix64, e: &mut RigEffects| -> f64 {
                 let rho = 0.2 * (3.0f64 / 0.2).powf(rng.uniform());
                 let q = rng.range(2.0, 30.0);
@@ -406,13 +403,12 @@ fn main() {
                     )
                     .map_err(|e| e.to_string())?;
                     (
-                        std_diff(&m, &ls(&without.samples)?),
-                        std_diff(&m, &ls(&other.samples)?),
+                        spread_of_difference(&m, &ls(&without.samples)?),
+                        spread_of_difference(&m, &ls(&other.samples)?),
                     )
                 };
                 // The K-draw measure (module docs): K records with the effect (this one and
                 // K − 1 other seeds) against K without it (K other seeds).
-                let k_draws: usize = env("CL_VIS_DRAWS", 4usize).max(2);
                 let draws = |effects: RigEffects, salt: u64| -> Result<Vec<Vec<f64>>, String> {
                     (0..k_draws)
                         .into_par_iter()
@@ -450,7 +446,7 @@ fn main() {
                             }
                             let w = generate(&gb, &RigSpec { effects: less, ..spec })
                                 .map_err(|e| e.to_string())?;
-                            one.push((name.clone(), std_diff(&m, &ls(&w.samples)?) > v_noise));
+                            one.push((name.clone(), spread_of_difference(&m, &ls(&w.samples)?) > v_noise));
                             let (d, s) = effect_visibility(&with_k, &draws(less, 0xD2 + idx as u64)?);
                             many.push((name.clone(), d > SQRT_2 * s));
                         }
@@ -631,18 +627,16 @@ fn main() {
         std::fs::write(&p, serde_json::to_string_pretty(&rows).expect("json")).expect("write");
     }
     if std::env::var("CL_VISIBILITY_ONLY").is_ok() {
-        report_visibility(&rows, n, &seeds);
+        report_visibility(&rows, n, &seeds, scale, k_draws);
     } else {
         report(&rows, n, &seeds, wall);
     }
 }
 
 /// `CL_VISIBILITY_ONLY=1`: visible records per kind under both measures.
-fn report_visibility(rows: &[Row], n: usize, seeds: &[u64]) {
-    let scale: f64 = env("CL_EFFECT_SCALE", 1.0);
+fn report_visibility(rows: &[Row], n: usize, seeds: &[u64], scale: f64, k_draws: usize) {
     println!(
-        "visibility: {n} records a seed, base seeds {seeds:?}, effect scale {scale}, K = {} draws\n",
-        env("CL_VIS_DRAWS", 4usize).max(2)
+        "visibility: {n} records a seed, base seeds {seeds:?}, effect scale {scale}, K = {k_draws} draws\n"
     );
     println!("| kind | n | visible, one draw | visible, K draws | median d / s |");
     println!("| --- | --- | --- | --- | --- |");
@@ -798,18 +792,18 @@ fn report(rows: &[Row], n: usize, seeds: &[u64], wall: f64) {
         "| visible library effects named, effect by effect (K-draw measure; pair members on their own) | {} | ≥ 90 % |",
         pct(effects.iter().filter(|b| **b).count(), effects.len())
     );
-    let with_visible: Vec<&&Row> = lib_all
+    let with_visible: Vec<(&&Row, Vec<String>)> = lib_all
         .iter()
-        .copied()
-        .filter(|r| !visible_effects(r).is_empty())
+        .map(|r| (*r, visible_effects(r)))
+        .filter(|(_, v)| !v.is_empty())
         .collect();
     println!(
         "| … records with a visible effect: all visible effects named and nothing outside the truth | {} | — |",
         pct(
             with_visible
                 .iter()
-                .filter(|r| {
-                    visible_effects(r).iter().all(|v| r.named.contains(v))
+                .filter(|(r, vis)| {
+                    vis.iter().all(|v| r.named.contains(v))
                         && r.named.iter().all(|x| r.truth.contains(x))
                 })
                 .count(),
@@ -834,12 +828,12 @@ fn report(rows: &[Row], n: usize, seeds: &[u64], wall: f64) {
         )
     );
     // Pairs member by member: each member that is visible on its own, named or not.
-    for (label, k_draws) in [("K-draw", true), ("one-draw", false)] {
+    for (label, k_measure) in [("K-draw", true), ("one-draw", false)] {
         let members: Vec<(bool, bool)> = ok
             .iter()
             .filter(|r| r.kind == "pair")
             .flat_map(|r| {
-                let vis = if k_draws {
+                let vis = if k_measure {
                     &r.member_visible_k
                 } else {
                     &r.member_visible

@@ -298,12 +298,18 @@ pub fn effect_visibility(with: &[Vec<f64>], without: &[Vec<f64>]) -> (f64, f64) 
     };
     let (mw, mo) = (mean(with), mean(without));
     let s2 = 0.5 * (var(with, &mw) + var(without, &mo));
-    let diff: Vec<f64> = mw.iter().zip(&mo).map(|(a, b)| a - b).collect();
-    let n = diff.len() as f64;
-    let dm = diff.iter().sum::<f64>() / n;
-    let big_d2 = diff.iter().map(|v| (v - dm).powi(2)).sum::<f64>() / n;
-    let d2 = big_d2 - s2 * (1.0 / with.len() as f64 + 1.0 / without.len() as f64);
+    let d2 = spread_of_difference(&mw, &mo).powi(2)
+        - s2 * (1.0 / with.len() as f64 + 1.0 / without.len() as f64);
     (d2.max(0.0).sqrt(), s2.sqrt())
+}
+
+/// The RMS of `a − b` about its mean (dB for log spectra): how differently two spectra are
+/// shaped, a level change alone reading 0.
+pub fn spread_of_difference(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len()) as f64;
+    let d: Vec<f64> = a.iter().zip(b).map(|(x, y)| x - y).collect();
+    let mean = d.iter().sum::<f64>() / n;
+    (d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt()
 }
 
 #[cfg(test)]
