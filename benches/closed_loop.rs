@@ -409,8 +409,12 @@ fn main() {
                 };
                 // The K-draw measure (module docs): K records with the effect (this one and
                 // K − 1 other seeds) against K without it (K other seeds).
-                let draws = |effects: RigEffects, salt: u64| -> Result<Vec<Vec<f64>>, String> {
-                    (0..k_draws)
+                // Draws `from..K` (seeds mixed from the record's, `salt` and the draw index).
+                let draws = |effects: RigEffects,
+                             salt: u64,
+                             from: usize|
+                 -> Result<Vec<Vec<f64>>, String> {
+                    (from..k_draws)
                         .into_par_iter()
                         .map(|j| {
                             let seed = mix_seed(&[spec.seed, salt, j as u64]);
@@ -423,9 +427,10 @@ fn main() {
                 let (with_k, vis_d, vis_s) = if kind == "clean" {
                     (Vec::new(), 0.0, 0.0)
                 } else {
-                    let mut with_k = draws(e, 0xD1)?;
-                    with_k[0] = m.clone();
-                    let without_k = draws(RigEffects::default(), 0xD0)?;
+                    // Draw 0 is the record itself.
+                    let mut with_k = vec![m.clone()];
+                    with_k.extend(draws(e, 0xD1, 1)?);
+                    let without_k = draws(RigEffects::default(), 0xD0, 0)?;
                     let (d, s) = effect_visibility(&with_k, &without_k);
                     (with_k, d, s)
                 };
@@ -447,7 +452,7 @@ fn main() {
                             let w = generate(&gb, &RigSpec { effects: less, ..spec })
                                 .map_err(|e| e.to_string())?;
                             one.push((name.clone(), spread_of_difference(&m, &ls(&w.samples)?) > v_noise));
-                            let (d, s) = effect_visibility(&with_k, &draws(less, 0xD2 + idx as u64)?);
+                            let (d, s) = effect_visibility(&with_k, &draws(less, 0xD2 + idx as u64, 0)?);
                             many.push((name.clone(), d > SQRT_2 * s));
                         }
                         (one, many)
