@@ -61,6 +61,13 @@
 //! bursts by 20 log10 x dB): at x = 0.01 no effect should be visible. `CL_VISIBILITY_ONLY=1`
 //! computes the visibility alone (no diagnosis, no closed loop) and prints visible counts per
 //! kind under both measures.
+//!
+//! An unexplained feature is a line of the residual (`unexplained`) or a feature of the
+//! record's level over time (`unexplained_in_time`: bursts, impacts, level drift; session 13);
+//! rows carry the count of both and `in_time`, the latter's kinds. `CL_LEVEL_ONLY=1` draws the
+//! records and prints one `LEVEL` line each (the level trace's scatter, burst threshold,
+//! highest window, runs, drift and its standard error, the time features) and nothing else:
+//! seconds for 528 records.
 
 use std::collections::BTreeMap;
 use std::f64::consts::SQRT_2;
@@ -126,8 +133,11 @@ struct Row {
     vis_d: f64,
     vis_s: f64,
     named: Vec<String>,
+    /// Unexplained features: the residual's lines and the level-over-time features.
     unexplained: usize,
     guesses: Vec<String>,
+    /// The kinds of the level-over-time features among them (`unexplained_in_time`).
+    in_time: Vec<String>,
     error_before: f64,
     error_after: f64,
     ea_before: f64,
@@ -347,6 +357,7 @@ fn main() {
                 named: vec![],
                 unexplained: 0,
                 guesses: vec![],
+                in_time: vec![],
                 error_before: f64::NAN,
                 error_after: f64::NAN,
                 ea_before: f64::NAN,
@@ -382,6 +393,28 @@ fn main() {
                 let rec = generate(&gb, &spec).map_err(|e| e.to_string())?;
                 let f1 = omega1 * f_ref;
                 let ls = |x: &[f64]| log_spectrum(x, spec.sample_rate, f1).map_err(|e| e.to_string());
+                if std::env::var("CL_LEVEL_ONLY").is_ok() {
+                    use gearwear::closed_loop::level::{LevelTrace, level_features};
+                    let shafts: Vec<(String, f64)> =
+                        gb.shaft_ratios().into_iter().map(|(n, v)| (n, v.abs())).collect();
+                    let tr = LevelTrace::new(&rec.samples, spec.sample_rate, f1);
+                    let feats = level_features(&rec.samples, spec.sample_rate, f1, &shafts, None);
+                    let line = match &tr {
+                        None => "no trace".to_string(),
+                        Some(tr) => {
+                            let runs = tr.runs();
+                            let peak = tr.levels_db.iter().fold(f64::MIN, |a, b| a.max(*b)) - tr.median_db;
+                            let d = tr.drift(&runs).unwrap_or((f64::NAN, f64::NAN));
+                            format!(
+                                "spread {:.3} thr {:.2} peak {:.2} runs {} drift {:.2} se {:.3} feats {:?}",
+                                tr.spread_db, tr.burst_threshold_db(), peak, runs.len(), d.0, d.1,
+                                feats.iter().map(|f| f.kind).collect::<Vec<_>>()
+                            )
+                        }
+                    };
+                    eprintln!("LEVEL {base} {i} {kind} size {size:.3} f1 {f1:.1} {line}");
+                    return Err("level only".into());
+                }
                 let m = ls(&rec.samples)?;
                 let (v_effect, v_noise) = if kind == "clean" {
                     (0.0, 0.0)
@@ -541,8 +574,14 @@ fn main() {
                 };
                 Ok(Row {
                     named,
-                    unexplained: rep.unexplained.len(),
-                    guesses: rep.unexplained.iter().map(|u| u.guess.clone()).collect(),
+                    unexplained: rep.unexplained.len() + rep.unexplained_in_time.len(),
+                    guesses: rep
+                        .unexplained
+                        .iter()
+                        .map(|u| u.guess.clone())
+                        .chain(rep.unexplained_in_time.iter().map(|u| u.guess.clone()))
+                        .collect(),
+                    in_time: rep.unexplained_in_time.iter().map(|u| u.kind.to_string()).collect(),
                     error_before: rep.error_before,
                     error_after: rep.error_after,
                     ea_before: rep.wear_before.ea,

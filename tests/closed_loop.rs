@@ -53,6 +53,11 @@ fn clean_record_claims_no_effect() {
     let r = run(RigEffects::default(), 2000, 0.03);
     assert!(r.effects.is_empty(), "claimed {:?}", names(&r));
     assert!(
+        r.unexplained_in_time.is_empty(),
+        "{:?}",
+        r.unexplained_in_time
+    );
+    assert!(
         (r.wear_after.ea - EA).abs() < 0.05,
         "ea {}",
         r.wear_after.ea
@@ -260,6 +265,12 @@ fn a_damaged_tooth_is_claimed_at_its_shaft() {
         .find(|e| e.kind == "element" && e.name == "tooth-damage")
         .unwrap_or_else(|| panic!("no tooth damage in {:?}", r.candidates));
     assert_eq!(tooth.labels.get("shaft"), Some(&pinion.shaft), "{tooth:?}");
+    // Its impacts, if the level trace sees them, are the model's now: not unexplained.
+    assert!(
+        !r.unexplained_in_time.iter().any(|f| f.kind == "impacts"),
+        "{:?}",
+        r.unexplained_in_time
+    );
     let loss = tooth.parameters["stiffness_loss"];
     assert!((0.3..=0.9).contains(&loss), "stiffness loss {loss} for 0.6");
     assert!(r.error_after < r.error_before);
@@ -269,6 +280,52 @@ fn a_damaged_tooth_is_claimed_at_its_shaft() {
         "{:?}",
         r.wear_after
     );
+}
+
+/// Noise bursts only raise the spectrum's floor: the level over time reports them (the
+/// spectral residual has nothing to say), and no library effect takes them.
+#[test]
+fn noise_bursts_are_reported_in_time_and_not_claimed() {
+    let r = run(
+        RigEffects {
+            bursts: Some((4, 6.0)),
+            ..Default::default()
+        },
+        2010,
+        1.0,
+    );
+    assert!(r.effects.is_empty(), "misattributed to {:?}", names(&r));
+    let b = r
+        .unexplained_in_time
+        .iter()
+        .find(|f| f.kind == "bursts")
+        .unwrap_or_else(|| panic!("no bursts in {:?}", r.unexplained_in_time));
+    // Four 10 ms bursts 6 dB over the signal: 7 dB in a window inside one, up to 9.5 dB where
+    // two overlap (they are placed at random and may touch: then one run).
+    assert!((1..=4).contains(&b.times_s.len()), "{b:?}");
+    assert!(b.times_s.iter().all(|t| (0.0..=0.6).contains(t)), "{b:?}");
+    assert!((4.0..=10.5).contains(&b.size_db), "{b:?}");
+}
+
+/// A sensor gain rising by 40 % over the record: a level drift of 20 log10(1.2/0.8) = 3.5 dB
+/// (less the half window at each end), unexplained, not claimed.
+#[test]
+fn a_gain_drift_is_reported_as_a_level_drift() {
+    let r = run(
+        RigEffects {
+            gain_drift: Some(0.4),
+            ..Default::default()
+        },
+        2011,
+        1.0,
+    );
+    assert!(r.effects.is_empty(), "misattributed to {:?}", names(&r));
+    let d = r
+        .unexplained_in_time
+        .iter()
+        .find(|f| f.kind == "level-drift")
+        .unwrap_or_else(|| panic!("no drift in {:?}", r.unexplained_in_time));
+    assert!((d.size_db - 3.5).abs() < 0.7, "{d:?}");
 }
 
 #[test]

@@ -50,11 +50,14 @@
 //!    claimed (or a refit that does not lower the plain error) the model is unchanged and
 //!    `wear_after` is the table's estimate.
 //! 8. **Unexplained**: runs of the final residual beyond ±[`CalibrateOptions::unexplained_db`],
-//!    each with a plain-words guess ([`residual::annotate`]).
+//!    each with a plain-words guess ([`residual::annotate`]); and, from the record's level
+//!    over time, bursts, impacts at a shaft's rate the fit did not claim, or a level drift
+//!    ([`level`]: the spectrum averages them away).
 
 pub mod effects;
 pub mod fit;
 pub mod held;
+pub mod level;
 pub mod residual;
 pub mod sidebands;
 pub mod spectrum;
@@ -84,6 +87,7 @@ use effects::{
 use fit::{
     Weights, effective_points, fit_sensor, profile_interval_noisy, search_resonance, sensor_model,
 };
+use level::{TimeFeature, level_features};
 use residual::{annotate, fingerprint_gap, residual_features};
 use sidebands::{SidebandCheck, SidebandScan, refuses};
 use spectrum::{grid, grid_index, log_spectrum, rms_distance, running_median};
@@ -268,6 +272,10 @@ pub struct CalibrationReport {
     pub effects: Vec<Effect>,
     /// Residual features the final model leaves (frequencies and sizes).
     pub unexplained: Vec<ResidualFeature>,
+    /// What the record's level over time shows and a steady model does not make: bursts,
+    /// impacts once per revolution of a shaft the fit claimed no damaged tooth on, a level
+    /// drift ([`level`]).
+    pub unexplained_in_time: Vec<TimeFeature>,
     /// Residual features of the plain model (before).
     pub residual_features_before: Vec<ResidualFeature>,
     /// Effective number of independent grid points of the plain model's standardised residual
@@ -1367,6 +1375,16 @@ pub fn calibrate(
     let m_rel = rel(&m);
     let mut unexplained = residual_features(&res_after, &m_rel, &r, f1, opts.unexplained_db);
     annotate(&mut unexplained, gb, f1, &sideband_checks);
+    let shaft_rates: Vec<(String, f64)> = gb
+        .shaft_ratios()
+        .into_iter()
+        .map(|(n, v)| (n, v.abs()))
+        .collect();
+    let claimed_tooth = effects
+        .iter()
+        .find(|e| e.name == TOOTH_DAMAGE)
+        .and_then(|e| e.parameters.get("shaft_ratio").copied());
+    let unexplained_in_time = level_features(&record.samples, fs, f1, &shaft_rates, claimed_tooth);
     let residual_features_before =
         residual_features(&res_before, &m_rel, &r, f1, opts.unexplained_db);
     if !(error_before.is_finite() && error_after.is_finite()) {
@@ -1379,6 +1397,7 @@ pub fn calibrate(
         omega1,
         effects,
         unexplained,
+        unexplained_in_time,
         residual_features_before,
         effective_points: j_eff,
         null_spread,

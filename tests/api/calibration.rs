@@ -121,6 +121,14 @@ async fn calibrate_keep_use_and_clear(b: Backend) {
     assert_eq!(got["machine_id"], "gb-1");
     assert_eq!(got["effects"], rep["effects"]);
     assert_eq!(got["sideband_checks"], rep["sideband_checks"]);
+    // The level over time: a steady record, nothing to report, and the field is kept.
+    assert_eq!(
+        rep["unexplained_in_time"],
+        json!([]),
+        "{}",
+        rep["unexplained_in_time"]
+    );
+    assert_eq!(got["unexplained_in_time"], rep["unexplained_in_time"]);
     assert_eq!(got["error_after"], rep["error_after"]);
 
     // A later record of the machine (another seed, same gearbox) is diagnosed with the
