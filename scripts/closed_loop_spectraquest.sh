@@ -2,8 +2,8 @@
 # The closed loop (issue 15, part 4) on the real SpectraQuest records with their own gearbox
 # description: a table for the description, then `gearwear calibrate` on every healthy and
 # broken-tooth record, one line each: f1, effects claimed, error before → after, wear before →
-# after, the two tooth-damage candidates (ΔBIC, their shaft's TSA FM4, eligible), null spread /
-# claim margin.
+# after, the two tooth-damage candidates (ΔBIC, their shaft's TSA FM4, eligible), the level-
+# over-time features (`unexplained_in_time`: kind, runs, size), null spread / claim margin.
 #
 #   scripts/closed_loop_spectraquest.sh [CHANNEL]     # default a1
 #
@@ -41,9 +41,13 @@ teeth = '; '.join(
     + (f", TSA FM4 {c['tsa_fm4']:.2f}" if c.get('tsa_fm4') is not None else ', no TSA')
     + ('' if c['eligible'] else ' (not eligible)')
     for c in r['candidates'] if c['name'] == 'tooth-damage')
+timef = '; '.join(
+    f"{t['kind']} ({len(t['times_s'])}, {t['size_db']:+.1f} dB)" if t['times_s']
+    else f"{t['kind']} ({t['size_db']:+.1f} dB)"
+    for t in r.get('unexplained_in_time', [])) or 'none'
 print(f"{sys.argv[2]:8} f1 {r['f1_hz']:.1f} Hz | {eff} | error {r['error_before']:.2f} → {r['error_after']:.2f} dB"
       f" | ea {wb['ea']:.3f} → {wa['ea']:.3f} [{wa['ea_lower']:.3f}, {wa['ea_upper']:.3f}] ({wa['method']})"
-      f" | tooth: {teeth} | null spread {r['null_spread']:.1f}, margin {r['claim_margin']:.0f} | {sys.argv[3]} s")
+      f" | tooth: {teeth} | in time: {timef} | null spread {r['null_spread']:.1f}, margin {r['claim_margin']:.0f} | {sys.argv[3]} s")
 EOF
 done
 [ -z "${KEEP:-}" ] || echo "reports in $work"
