@@ -403,7 +403,7 @@ fn main() {
                         None => "no trace".to_string(),
                         Some(tr) => {
                             let runs = tr.runs();
-                            let peak = tr.levels_db.iter().fold(f64::MIN, |a, b| a.max(*b)) - tr.median_db;
+                            let peak = (0..tr.levels_db.len()).map(|k| tr.excess_db(k)).fold(f64::MIN, f64::max);
                             let d = tr.drift(&runs).unwrap_or((f64::NAN, f64::NAN));
                             format!(
                                 "spread {:.3} thr {:.2} peak {:.2} runs {} drift {:.2} se {:.3} feats {:?}",
