@@ -1,5 +1,6 @@
 //! Prints the closed-loop table of `docs/closed-loop.md`: virtual-rig records with one effect
-//! each (known to this program only), calibrated by `gearwear::closed_loop::calibrate`.
+//! each (known to this program only), calibrated by `gearwear::closed_loop::calibrate`. The
+//! "unexplained" column lists the residual's lines and the level-over-time features.
 //!
 //! `cargo run --release --example closed_loop_cases [-- --json DIR]`
 
@@ -67,6 +68,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             20.0,
         ),
         ("broadband noise, SNR 10 dB", RigEffects::default(), 10.0),
+        (
+            "noise bursts 4 × 10 ms, +6 dB (not in library)",
+            RigEffects {
+                bursts: Some((4, 6.0)),
+                ..Default::default()
+            },
+            20.0,
+        ),
     ];
     println!(
         "| case | effect found | unexplained (f/f1: dB) | error before (dB) | error after (dB) | ea before | ea after | ea truth | planetary before/after/truth | seconds |"
@@ -103,6 +112,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .unexplained
             .iter()
             .map(|u| format!("{} {:.3}: {:+.1}", u.kind, u.frequency_ratio, u.size_db))
+            .chain(
+                rep.unexplained_in_time
+                    .iter()
+                    .map(|t| match t.times_s.len() {
+                        0 => format!("{}: {:+.1} dB", t.kind, t.size_db),
+                        n => format!("{} ×{n}: {:+.1} dB", t.kind, t.size_db),
+                    }),
+            )
             .collect();
         let truth_pl = effects
             .planetary
