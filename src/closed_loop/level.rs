@@ -241,49 +241,42 @@ pub fn level_features(
             .iter()
             .map(|r| tr.excess_db(r.2))
             .fold(f64::MIN, f64::max);
-        let periodic = periodic_shaft(&times, tr.duration_s, f1, shafts);
-        let ms = |t: &[f64]| {
-            t.iter()
-                .map(|v| format!("{:.3}", v))
-                .collect::<Vec<_>>()
-                .join(", ")
-        };
-        match periodic {
-            Some((name, rate)) => {
-                let ours = claimed_tooth.is_some_and(|c| (c - rate).abs() <= 1e-6 * rate.max(1e-9));
-                if !ours {
-                    out.push(TimeFeature {
-                        kind: "impacts",
-                        times_s: times.clone(),
-                        size_db: peak,
-                        spread_db: tr.spread_db,
-                        window_s: tr.window_s,
-                        guess: format!(
-                            "{} rises of the level (up to {peak:+.1} dB over the local \
-                             median, at t = {} s) once per revolution of shaft `{name}` ({:.2} Hz): a \
-                             local fault on that shaft — a damaged tooth the spectrum fit did \
-                             not claim? Look at that shaft's time-synchronous average",
-                            times.len(),
-                            ms(&times),
-                            rate * f1
-                        ),
-                    });
-                }
-            }
-            None => out.push(TimeFeature {
-                kind: "bursts",
-                times_s: times.clone(),
+        let n = times.len();
+        let at = times
+            .iter()
+            .map(|t| format!("{t:.3}"))
+            .collect::<Vec<_>>()
+            .join(", ");
+        match periodic_shaft(&times, tr.duration_s, f1, shafts) {
+            // The fit's damaged tooth on that shaft makes them: the model has them.
+            Some((_, rate))
+                if claimed_tooth.is_some_and(|c| (c - rate).abs() <= 1e-6 * rate.max(1e-9)) => {}
+            Some((name, rate)) => out.push(TimeFeature {
+                kind: "impacts",
+                times_s: times,
                 size_db: peak,
                 spread_db: tr.spread_db,
                 window_s: tr.window_s,
                 guess: format!(
-                    "{} burst{} of broadband energy (up to {peak:+.1} dB over the local \
-                     median level, at t = {} s) at no shaft's period: impacts from outside \
+                    "{n} rises of the level (up to {peak:+.1} dB over the local median, at \
+                     t = {at} s) once per revolution of shaft `{name}` ({:.2} Hz): a local \
+                     fault on that shaft — a damaged tooth the spectrum fit did not claim? \
+                     Look at that shaft's time-synchronous average",
+                    rate * f1
+                ),
+            }),
+            None => out.push(TimeFeature {
+                kind: "bursts",
+                times_s: times,
+                size_db: peak,
+                spread_db: tr.spread_db,
+                window_s: tr.window_s,
+                guess: format!(
+                    "{n} burst{} of broadband energy (up to {peak:+.1} dB over the local \
+                     median level, at t = {at} s) at no shaft's period: impacts from outside \
                      the gear mesh, a loose part, or electrical interference — they raise the \
                      spectrum's floor; listen to the machine and check the sensor's cable",
-                    times.len(),
-                    if times.len() == 1 { "" } else { "s" },
-                    ms(&times)
+                    if n == 1 { "" } else { "s" },
                 ),
             }),
         }
