@@ -395,8 +395,7 @@ fn main() {
                 let ls = |x: &[f64]| log_spectrum(x, spec.sample_rate, f1).map_err(|e| e.to_string());
                 if std::env::var("CL_LEVEL_ONLY").is_ok() {
                     use gearwear::closed_loop::level::{LevelTrace, level_features};
-                    let shafts: Vec<(String, f64)> =
-                        gb.shaft_ratios().into_iter().map(|(n, v)| (n, v.abs())).collect();
+                    let shafts = gearwear::closed_loop::effects::shaft_rates(&gb);
                     let tr = LevelTrace::new(&rec.samples, spec.sample_rate, f1);
                     let feats = level_features(&rec.samples, spec.sample_rate, f1, &shafts, None);
                     let line = match &tr {

@@ -182,6 +182,19 @@ pub fn shaft_ratio(gb: &Gearbox) -> f64 {
     gb.input_shaft_ratio()
 }
 
+/// Every shaft's rate over f1, named, positive (a fixed shaft left out), fastest first: what
+/// the residual's guesses and the level trace's impacts are read against.
+pub fn shaft_rates(gb: &Gearbox) -> Vec<(String, f64)> {
+    let mut shafts: Vec<(String, f64)> = gb
+        .shaft_ratios()
+        .into_iter()
+        .map(|(n, v)| (n, v.abs()))
+        .filter(|(_, v)| *v > 0.0)
+        .collect();
+    shafts.sort_by(|a, b| b.1.total_cmp(&a.1));
+    shafts
+}
+
 /// Resolve the gearbox's assembly for `p`: the eccentricity harmonics (amplitude `e` b at
 /// `(1 ± s) f1`, `s` the modulating shaft's rate over f1, phase 0) added to the reference mesh
 /// when `e > 0`, and a damaged tooth on it (pulse one mesh period long, `1/z` of a revolution)

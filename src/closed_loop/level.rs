@@ -69,9 +69,7 @@ pub struct LevelTrace {
     /// The local median level at each window (see [`LOCAL_HALF`]), the baseline bursts stand
     /// above (dB).
     pub baseline_db: Vec<f64>,
-    /// The median level of the whole record (dB) and the robust scatter about the local
-    /// median (dB).
-    pub median_db: f64,
+    /// The robust scatter of the levels about the local median (dB).
     pub spread_db: f64,
     /// Record length (s).
     pub duration_s: f64,
@@ -105,7 +103,6 @@ impl LevelTrace {
             levels.push(10.0 * ms.log10());
             start += hop;
         }
-        let median_db = median(&mut levels.clone());
         // The local median: over 2 LOCAL_HALF + 1 windows, the span slid inside the trace at
         // its ends.
         let n = levels.len();
@@ -127,7 +124,6 @@ impl LevelTrace {
             hop_s: hop as f64 / fs,
             levels_db: levels,
             baseline_db,
-            median_db,
             spread_db,
             duration_s: x.len() as f64 / fs,
         })

@@ -82,7 +82,7 @@ use crate::signature::{SignatureTable, SplitMix64, mix_seed};
 use crate::solver::Dopri5Options;
 use effects::{
     Effect, ElementParams, MeshGear, PATH_RESONANCE, PLANETARY_WEAR, Resonance, SHAFT_MODULATION,
-    TOOTH_DAMAGE, build_model, reference_gears, shaft_ratio,
+    TOOTH_DAMAGE, build_model, reference_gears, shaft_rates, shaft_ratio,
 };
 use fit::{
     Weights, effective_points, fit_sensor, profile_interval_noisy, search_resonance, sensor_model,
@@ -1382,16 +1382,12 @@ pub fn calibrate(
     let m_rel = rel(&m);
     let mut unexplained = residual_features(&res_after, &m_rel, &r, f1, opts.unexplained_db);
     annotate(&mut unexplained, gb, f1, &sideband_checks);
-    let shaft_rates: Vec<(String, f64)> = gb
-        .shaft_ratios()
-        .into_iter()
-        .map(|(n, v)| (n, v.abs()))
-        .collect();
     let claimed_tooth = effects
         .iter()
         .find(|e| e.name == TOOTH_DAMAGE)
         .and_then(|e| e.parameters.get("shaft_ratio").copied());
-    let unexplained_in_time = level_features(&record.samples, fs, f1, &shaft_rates, claimed_tooth);
+    let unexplained_in_time =
+        level_features(&record.samples, fs, f1, &shaft_rates(gb), claimed_tooth);
     let residual_features_before =
         residual_features(&res_before, &m_rel, &r, f1, opts.unexplained_db);
     if !(error_before.is_finite() && error_after.is_finite()) {

@@ -22,6 +22,7 @@
 //! position, or an over-predicted line). Tolerance: 1.5 grid steps (`1.5 f1 / 128`).
 
 use super::ResidualFeature;
+use super::effects::shaft_rates;
 use super::sidebands::SidebandCheck;
 use super::spectrum::{GRID_PERIODS, grid_index};
 use crate::gearbox::Gearbox;
@@ -99,14 +100,7 @@ pub(crate) fn annotate(
     let extra: Vec<usize> = (0..features.len())
         .filter(|&i| features[i].kind == "extra")
         .collect();
-    // The gearbox's shaft rates over f1 (named, positive), fastest first.
-    let mut shafts: Vec<(String, f64)> = gb
-        .shaft_ratios()
-        .into_iter()
-        .map(|(n, v)| (n, v.abs()))
-        .filter(|(_, v)| *v > 0.0)
-        .collect();
-    shafts.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let shafts = shaft_rates(gb);
     // 1. mains: odd harmonics of 50 or 60 Hz.
     for mains in [50.0, 60.0] {
         let near = |f: f64| -> Option<u32> {
