@@ -111,6 +111,10 @@ fn library(kind: &str) -> bool {
     )
 }
 
+/// A candidate of the report as a row keeps it: name, ΔBIC, eligible, fingerprint share, RMS
+/// error (dB), why it was refused, a pair's member shares.
+type CandidateRow = (String, f64, bool, f64, f64, Vec<String>, Vec<f64>);
+
 #[derive(Debug, Clone, serde::Serialize)]
 struct Row {
     /// The record's base seed and index in its set (`CL_SEED`, `CL_INDICES`).
@@ -163,7 +167,7 @@ struct Row {
     claim_margin: f64,
     null_deviances: Vec<f64>,
     /// (name, ΔBIC, eligible, fingerprint share, error dB)
-    candidates: Vec<(String, f64, bool, f64, f64)>,
+    candidates: Vec<CandidateRow>,
     /// The record's tacho-less condition indicators (the diagnosis's): FM4 of the difference
     /// signal, kurtosis of the record.
     fm4: f64,
@@ -187,7 +191,7 @@ struct Row {
     named_shaft: Option<f64>,
     /// The report's sideband checks: (shaft, spacing over f1, prominence dB, off the rate,
     /// prominence of the sidebands at the shaft's rate dB).
-    sidebands: Vec<(String, f64, f64, bool, f64)>,
+    sidebands: Vec<(String, f64, f64, bool, f64, bool)>,
 }
 
 /// A pair's members, each with whether it is visible on its own.
@@ -609,6 +613,8 @@ fn main() {
                                 c.eligible,
                                 c.fingerprint_share,
                                 c.error_db,
+                                c.refused.clone(),
+                                c.member_shares.clone(),
                             )
                         })
                         .collect(),
@@ -630,6 +636,7 @@ fn main() {
                                 c.prominence_db,
                                 c.off_rate,
                                 c.shaft_prominence_db,
+                                c.at_rate,
                             )
                         })
                         .collect(),
