@@ -158,8 +158,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             );
             for c in &rep.candidates {
                 eprintln!(
-                    "   {:40} err {:6.2} dBIC {:8.1} fingerprint share {:5.2} eligible {}",
-                    c.name, c.error_db, c.delta_bic, c.fingerprint_share, c.eligible
+                    "   {:40} err {:6.2} dBIC {:8.1} fingerprint share {:5.2} eligible {}{}",
+                    c.name,
+                    c.error_db,
+                    c.delta_bic,
+                    c.fingerprint_share,
+                    c.eligible,
+                    if c.refused.is_empty() {
+                        String::new()
+                    } else {
+                        format!(" (refused: {})", c.refused.join("; "))
+                    }
                 );
             }
         }
