@@ -10,7 +10,7 @@ were made with (it prints `same` = records whose answer is unchanged); a rule re
 a hypothesis to measure on fresh seeds with the real code, not a result.
 
     scripts/closed_loop_replay.py ROWS.json [ROWS.json …] [--min-col N] [--sm-alt DB]
-        [--sm-wide] [--share S] [--tooth F] [--verbose]
+        [--sm-wide] [--share S] [--tooth F] [--margin M] [--null-z Z] [--verbose]
 
 --min-col N    a path resonance must colour N of the plain model's lines (as the rows were
                made: the count is read from the refusal's text);
@@ -20,7 +20,8 @@ a hypothesis to measure on fresh seeds with the real code, not a result.
 --sm-wide      a modulation's share on sideband orders ±1–3 (only in rows of the session-14
                diagnostic build, whose candidates carry it as an 8th element);
 --share S      the fingerprint share needed (0.25);
---tooth F      the tooth-damage margin factor (2.5).
+--tooth F      the tooth-damage margin factor (2.5);
+--margin M, --null-z Z   the claim margin M + Z · null spread (as stored: 50 + 0.5 spread).
 """
 import argparse
 import json
@@ -42,6 +43,8 @@ def decide(r, P):
     if not cands:
         return r['named']
     margin = r['claim_margin']
+    if P.get('margin') is not None:
+        margin = P['margin'] + P['null_z'] * r['null_spread']
     err0 = r['error_before']
     sb = {s[0]: s for s in r['sidebands']}
     S = P['share']
@@ -109,9 +112,13 @@ def main():
     ap.add_argument('--sm-wide', action='store_true')
     ap.add_argument('--share', type=float, default=0.25)
     ap.add_argument('--tooth', type=float, default=2.5)
+    ap.add_argument('--margin', type=float, default=None,
+                    help='claim margin before its null part (50; default: as stored)')
+    ap.add_argument('--null-z', type=float, default=0.5)
     ap.add_argument('--verbose', action='store_true')
     a = ap.parse_args()
-    P = dict(min_col=a.min_col, sm_alt=a.sm_alt, sm_wide=a.sm_wide, share=a.share, tooth=a.tooth)
+    P = dict(min_col=a.min_col, sm_alt=a.sm_alt, sm_wide=a.sm_wide, share=a.share, tooth=a.tooth,
+             margin=a.margin, null_z=a.null_z)
     rows = [r for f in a.rows for r in json.load(open(f)) if not r.get('error')]
     if any(len(r['candidates'][0]) < 7 for r in rows if r['candidates']):
         raise SystemExit('rows older than session 14 (no refusal reasons): cannot replay')
