@@ -166,7 +166,6 @@ struct Row {
     null_spread: f64,
     claim_margin: f64,
     null_deviances: Vec<f64>,
-    /// (name, ΔBIC, eligible, fingerprint share, error dB)
     candidates: Vec<CandidateRow>,
     /// The record's tacho-less condition indicators (the diagnosis's): FM4 of the difference
     /// signal, kurtosis of the record.
@@ -190,7 +189,7 @@ struct Row {
     /// The claimed shaft modulation's / tooth damage's shaft rate over f1.
     named_shaft: Option<f64>,
     /// The report's sideband checks: (shaft, spacing over f1, prominence dB, off the rate,
-    /// prominence of the sidebands at the shaft's rate dB).
+    /// prominence of the sidebands at the shaft's rate dB, the strongest at the rate).
     sidebands: Vec<(String, f64, f64, bool, f64, bool)>,
 }
 

@@ -92,7 +92,7 @@ use fit::{
 };
 use level::{TimeFeature, level_features};
 use residual::{annotate, fingerprint_gap, residual_features};
-use sidebands::{SidebandCheck, SidebandScan, refuses};
+use sidebands::{SidebandCheck, SidebandScan, refusal, refuses};
 use spectrum::{grid, grid_index, log_spectrum, rms_distance, running_median};
 
 /// Tuning of [`calibrate`].
@@ -1137,8 +1137,8 @@ pub fn calibrate(
     // candidate's RSS improvement over the plain model at the same ea (so that a wear
     // correction, which moves every line, does not count) that falls on its fingerprint points
     // (the plain model's own lines for a path stage — a resonance colours what the gearbox
-    // makes; the sidebands ± s of its shaft around every line of the plain model (and
-    // 1, 2 f1) for shaft modulation; the shaft's order comb m s (all m) for tooth damage;
+    // makes; the sidebands ± k s (k = 1, 2, 3, [`SM_ORDERS`]) of its shaft around every line
+    // of the plain model (and 1, 2 f1) for shaft modulation; the shaft's order comb m s (all m) for tooth damage;
     // a f1 ± c f3 (a = 0, 1, 2; c = 1, 2) for
     // planetary wear; ±1 grid point) must reach [`SUPPORT_SHARE`]; otherwise the candidate is
     // not eligible.
@@ -1235,11 +1235,6 @@ pub fn calibrate(
     };
     let mut support: Vec<f64> = vec![1.0; cands.len()];
     let mut refused: Vec<Vec<String>> = vec![Vec::new(); cands.len()];
-    // Shaft modulation alone whose record shows sidebands at its shaft's rate (the strongest
-    // spacing, [`SM_SIDEBAND_PROMINENCE_DB`] above the scanned window's median): that is
-    // evidence of its own, and the candidate is eligible below [`SUPPORT_SHARE`] if it beats
-    // "no effect" by [`SM_SIDEBAND_MARGIN_FACTOR`] claim margins.
-    let mut sideband_evidence: Vec<bool> = vec![false; cands.len()];
     for (ci, c) in cands.iter().enumerate().skip(1) {
         let mut mask = vec![false; r.len()];
         for e in &c.effects {
@@ -1250,17 +1245,6 @@ pub fn calibrate(
         let (sp, _) = fit_sensor(&m, &plain, &r, None, w);
         let f_none = sensor_model(&plain, &r, &sp);
         support[ci] = improvement_share(&m, &f_none, &fc, &mask);
-        if let [e] = c.effects.as_slice()
-            && e.name == SHAFT_MODULATION
-            && let Some(&s) = e.parameters.get("shaft_ratio")
-        {
-            sideband_evidence[ci] = sideband_checks.iter().any(|k| {
-                (k.shaft_ratio - s).abs() < 1e-9
-                    && k.at_rate
-                    && !k.off_rate
-                    && k.shaft_prominence_db >= SM_SIDEBAND_PROMINENCE_DB
-            });
-        }
         // A path stage colours what the gearbox makes: it must move at least
         // [`MIN_COLOURED_LINES`] of the plain model's lines by more than 3 dB relative to f1.
         // A narrow mode that lifts one weak line next to a tone is a tone, not a path.
@@ -1284,18 +1268,10 @@ pub fn calibrate(
                 "the damaged gear's TSA is not impulsive (FM4 {fm4:.1} < {TOOTH_TSA_FM4})"
             ));
         }
-        for e in &c.effects {
-            if let Some(&s) = e.parameters.get("shaft_ratio")
-                && refuses(&sideband_checks, &e.name, s)
-            {
-                refused[ci].push(match e.name.as_str() {
-                    SHAFT_MODULATION => format!(
-                        "the record's strongest sidebands are not at the shaft's rate {s:.4} f1"
-                    ),
-                    _ => format!("the record's sidebands lie off the shaft's rate {s:.4} f1"),
-                });
-            }
-        }
+        refused[ci].extend(c.effects.iter().filter_map(|e| {
+            let s = *e.parameters.get("shaft_ratio")?;
+            refusal(&sideband_checks, &e.name, s)
+        }));
     }
 
     // Selection: a BIC on the deviance of the weighted robust score, `J_eff ln(score/J) +
@@ -1314,9 +1290,25 @@ pub fn calibrate(
     let none_ref = null_dev.iter().copied().fold(f64::INFINITY, f64::min);
     let bic0 = scores[0].min(none_ref + 3.0 * j_n.ln());
     let claim_margin = opts.bic_margin + opts.null_z * null_spread;
+    // Shaft modulation alone whose record shows sidebands at its shaft's rate (the strongest
+    // spacing, [`SM_SIDEBAND_PROMINENCE_DB`] above the scanned window's median): that is
+    // evidence of its own, and the candidate is eligible below [`SUPPORT_SHARE`] if it beats
+    // "no effect" by [`SM_SIDEBAND_MARGIN_FACTOR`] claim margins.
+    let sideband_evidence = |c: &Fitted| match c.effects.as_slice() {
+        [e] if e.name == SHAFT_MODULATION => e.parameters.get("shaft_ratio").is_some_and(|&s| {
+            sideband_checks.iter().any(|k| {
+                (k.shaft_ratio - s).abs() < 1e-9
+                    && k.at_rate
+                    && !k.off_rate
+                    && k.shaft_prominence_db >= SM_SIDEBAND_PROMINENCE_DB
+            })
+        }),
+        _ => false,
+    };
     let attributed = |i: usize| {
         support[i] >= SUPPORT_SHARE
-            || (sideband_evidence[i] && scores[i] < bic0 - SM_SIDEBAND_MARGIN_FACTOR * claim_margin)
+            || (sideband_evidence(&cands[i])
+                && scores[i] < bic0 - SM_SIDEBAND_MARGIN_FACTOR * claim_margin)
     };
     let eligible = |i: usize| attributed(i) && refused[i].is_empty() && rss_unw[i] <= rss0;
     let best_of = |pred: &dyn Fn(usize) -> bool| {

@@ -89,13 +89,23 @@ pub struct SidebandCheck {
 /// (`at_rate`), tooth damage when they lie off it (`off_rate`). A shaft without a check is not
 /// refused.
 pub fn refuses(checks: &[SidebandCheck], name: &str, shaft_ratio: f64) -> bool {
+    refusal(checks, name, shaft_ratio).is_some()
+}
+
+/// [`refuses`], with the reason in plain words (a candidate's `refused`).
+pub fn refusal(checks: &[SidebandCheck], name: &str, shaft_ratio: f64) -> Option<String> {
+    let s = shaft_ratio;
     checks
         .iter()
-        .filter(|c| (c.shaft_ratio - shaft_ratio).abs() < 1e-9)
-        .any(|c| match name {
-            SHAFT_MODULATION => !c.at_rate,
-            TOOTH_DAMAGE => c.off_rate,
-            _ => false,
+        .filter(|c| (c.shaft_ratio - s).abs() < 1e-9)
+        .find_map(|c| match name {
+            SHAFT_MODULATION if !c.at_rate => Some(format!(
+                "the record's strongest sidebands are not at the shaft's rate {s:.4} f1"
+            )),
+            TOOTH_DAMAGE if c.off_rate => Some(format!(
+                "the record's sidebands lie off the shaft's rate {s:.4} f1"
+            )),
+            _ => None,
         })
 }
 
