@@ -113,7 +113,16 @@ fn library(kind: &str) -> bool {
 
 /// A candidate of the report as a row keeps it: name, ΔBIC, eligible, fingerprint share, RMS
 /// error (dB), why it was refused, a pair's member shares.
-type CandidateRow = (String, f64, bool, f64, f64, Vec<String>, Vec<f64>);
+type CandidateRow = (
+    String,
+    f64,
+    bool,
+    f64,
+    f64,
+    Vec<String>,
+    Vec<f64>,
+    Option<gearwear::closed_loop::BandEvidence>,
+);
 
 #[derive(Debug, Clone, serde::Serialize)]
 struct Row {
@@ -162,7 +171,8 @@ struct Row {
     seconds: f64,
     error: Option<String>,
     /// The selection's null spread and claim margin, and every candidate's (name, ΔBIC,
-    /// eligible) — to read the margin's effect on the tuning seed.
+    /// eligible, fingerprint share, error dB, refusals, member shares, band evidence) — what
+    /// `scripts/closed_loop_replay.py` replays the selection from.
     null_spread: f64,
     claim_margin: f64,
     null_deviances: Vec<f64>,
@@ -614,6 +624,7 @@ fn main() {
                                 c.error_db,
                                 c.refused.clone(),
                                 c.member_shares.clone(),
+                                c.band,
                             )
                         })
                         .collect(),

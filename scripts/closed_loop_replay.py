@@ -21,7 +21,11 @@ a hypothesis to measure on fresh seeds with the real code, not a result.
                diagnostic build, whose candidates carry it as an 8th element);
 --share S      the fingerprint share needed (0.25);
 --tooth F      the tooth-damage margin factor (2.5);
---margin M, --null-z Z   the claim margin M + Z · null spread (as stored: 50 + 0.5 spread).
+--margin M, --null-z Z   the claim margin M + Z · null spread (as stored: 50 + 0.5 spread);
+--band-k K     a path resonance its own band supports (rows since session 15: the candidates'
+               8th element, `BandEvidence`) stands alone if it beats "no effect" by K claim
+               margins (2); --band-n N, --band-frac F set what "supports" means (8, 0.8);
+--no-band      the selection before session 15 (the band ignored).
 """
 import argparse
 import json
@@ -38,6 +42,19 @@ def sm_shaft(r, i):
     return '0.0345' if sm and i == sm[0] else '0.0100'
 
 
+def band_holds(c, P):
+    """The resonance's half-power band holds it (`BandEvidence::holds`)."""
+    if P['no_band'] or len(c) < 8:
+        return False
+    b = c[7]
+    if isinstance(b, dict):
+        b = [b['points'], b['improved'], b['share']]
+    if not isinstance(b, list):
+        return False
+    n, imp, share = b
+    return n >= P['band_n'] and imp >= P['band_frac'] * n and share >= P['share']
+
+
 def decide(r, P):
     cands = r['candidates']
     if not cands:
@@ -49,6 +66,10 @@ def decide(r, P):
     sb = {s[0]: s for s in r['sidebands']}
     S = P['share']
 
+    def band_stands(i):
+        c = cands[i]
+        return band_holds(c, P) and ('+' in c[0] or c[1] < -P['band_k'] * margin)
+
     def elig(i):
         if i == 0:
             return False
@@ -56,7 +77,8 @@ def decide(r, P):
         name, dbic, _el, share, err, refused, _members = c[:7]
         effs = name.split('+')
         sh = share
-        if P['sm_wide'] and 'shaft-modulation' in effs and len(c) > 7 and c[7] is not None:
+        if P['sm_wide'] and 'shaft-modulation' in effs and len(c) > 7 \
+                and isinstance(c[7], (int, float)):
             sh = c[7]
         if sh is None or sh < S:
             ok = False
@@ -64,10 +86,14 @@ def decide(r, P):
                 s = sb.get(SHAFT.get(sm_shaft(r, i)))
                 ok = (s is not None and len(s) > 5 and s[5] and not s[3]
                       and s[4] >= P['sm_alt'] and dbic < -2.0 * margin)
+            if effs == ['path-resonance'] and band_stands(i):
+                ok = True
             if not ok:
                 return False
         for msg in refused:
             if msg.startswith('the resonance moves'):
+                if band_stands(i):
+                    continue
                 if int(re.search(r'moves (\d+) of', msg).group(1)) < P['min_col']:
                     return False
             else:
@@ -92,7 +118,9 @@ def decide(r, P):
             return any(cands[i][0] == name and cands[i][1] < 0 and elig(i) for i in singles)
 
         members = cands[pair][0].split('+')
-        if all(supported(n) or (k < len(ms) and ms[k] >= S) for k, n in enumerate(members)) \
+        if all(supported(n) or (k < len(ms) and ms[k] >= S)
+               or (n == 'path-resonance' and band_stands(pair))
+               for k, n in enumerate(members)) \
                 and cands[pair][1] < cands[single][1] - margin * mfac(pair):
             chosen = pair
     return cands[chosen][0].split('+')
@@ -115,10 +143,15 @@ def main():
     ap.add_argument('--margin', type=float, default=None,
                     help='claim margin before its null part (50; default: as stored)')
     ap.add_argument('--null-z', type=float, default=0.5)
+    ap.add_argument('--band-k', type=float, default=2.0)
+    ap.add_argument('--band-n', type=int, default=8)
+    ap.add_argument('--band-frac', type=float, default=0.8)
+    ap.add_argument('--no-band', action='store_true')
     ap.add_argument('--verbose', action='store_true')
     a = ap.parse_args()
     P = dict(min_col=a.min_col, sm_alt=a.sm_alt, sm_wide=a.sm_wide, share=a.share, tooth=a.tooth,
-             margin=a.margin, null_z=a.null_z)
+             margin=a.margin, null_z=a.null_z, band_k=a.band_k, band_n=a.band_n,
+             band_frac=a.band_frac, no_band=a.no_band)
     rows = [r for f in a.rows for r in json.load(open(f)) if not r.get('error')]
     if any(len(r['candidates'][0]) < 7 for r in rows if r['candidates']):
         raise SystemExit('rows older than session 14 (no refusal reasons): cannot replay')
