@@ -4,7 +4,8 @@
 //! `cargo bench --bench closed_loop` (env: `CL_N` records, default 110 (22 min on the shared 2-core machine); `CL_SEED` base seed,
 //! default 2 — seed 1 is the one thresholds may be looked at on, report on another; `CL_OUT`
 //! JSON rows; `CL_KINDS` a comma list to run only some kinds; `CL_NULL_Z`, `CL_MARGIN` override
-//! `CalibrateOptions::null_z` and `bic_margin`, for tuning on seed 1 only; `CL_INDICATORS_ONLY=1`
+//! `CalibrateOptions::null_z` and `bic_margin`, for tuning on seed 1 only; `CL_CANDIDATE_SEEDS=true`
+//! (or `false`) sets `CalibrateOptions::candidate_seeds`; `CL_INDICATORS_ONLY=1`
 //! skips the closed loop and stores, as each row's `error` text, the record's tacho-less FM4
 //! and kurtosis, the drawn tooth damage and speed wander, visibility, each shaft's TSA FM4 and
 //! the tracked speed's relative standard deviation — every row then counts as failed in the
@@ -574,6 +575,7 @@ fn main() {
                 let mut copts = CalibrateOptions::default();
                 copts.null_z = env("CL_NULL_Z", copts.null_z);
                 copts.bic_margin = env("CL_MARGIN", copts.bic_margin);
+                copts.candidate_seeds = env("CL_CANDIDATE_SEEDS", copts.candidate_seeds);
                 let rep = calibrate(&rec, &table, &copts)
                     .map_err(|e| e.to_string())?;
                 let named: Vec<String> = rep.effects.iter().map(|e| e.name.clone()).collect();

@@ -25,7 +25,10 @@ a hypothesis to measure on fresh seeds with the real code, not a result.
 --band-k K     a path resonance its own band supports (rows since session 15: the candidates'
                8th element, `BandEvidence`) stands alone if it beats "no effect" by K claim
                margins (2); --band-n N, --band-frac F set what "supports" means (8, 0.8);
---no-band      the selection before session 15 (the band ignored).
+--no-band      the selection before session 15 (the band ignored);
+--ceiling      also count, per visible library effect, whether its own best single candidate
+               beats "no effect" at all and by the claim margin (× the tooth factor for tooth
+               damage): what any selection on these candidates could name with that margin.
 """
 import argparse
 import json
@@ -147,6 +150,7 @@ def main():
     ap.add_argument('--band-n', type=int, default=8)
     ap.add_argument('--band-frac', type=float, default=0.8)
     ap.add_argument('--no-band', action='store_true')
+    ap.add_argument('--ceiling', action='store_true')
     ap.add_argument('--verbose', action='store_true')
     a = ap.parse_args()
     P = dict(min_col=a.min_col, sm_alt=a.sm_alt, sm_wide=a.sm_wide, share=a.share, tooth=a.tooth,
@@ -186,6 +190,21 @@ def main():
     print(f"library records with a false claim: {false_lib}")
     print(f"clean, nothing claimed: {pct(clean_ok, n_clean)}")
     print(f"non-library kept out: {pct(non_ok, n_non)}")
+    if a.ceiling:
+        n = beats = by_margin = 0
+        for r in rows:
+            if r['kind'] not in LIB and r['kind'] != 'pair':
+                continue
+            for v in visible_effects(r):
+                own = [c[1] for c in r['candidates'] if c[0] == v]
+                if not own:
+                    continue
+                n += 1
+                fac = a.tooth if v == 'tooth-damage' else 1.0
+                beats += min(own) < 0
+                by_margin += min(own) < -r['claim_margin'] * fac
+        print(f"ceiling: the true effect's own single beats \"no effect\" {pct(beats, n)}, "
+              f"by the claim margin {pct(by_margin, n)}")
 
 
 if __name__ == '__main__':

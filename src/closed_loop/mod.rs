@@ -119,6 +119,12 @@ pub struct CalibrateOptions {
     /// The claim margin grows by this many times the seed-to-seed spread of the plain model's
     /// deviance (`null_spread` of the report): an effect must beat the model's own scatter.
     pub null_z: f64,
+    /// Score every candidate from the same initial states as "no effect" (the loop's own and
+    /// the [`CalibrateOptions::model_seeds`] others) and keep its best, as "no effect" is
+    /// scored; otherwise a candidate is scored from the loop's own initial state only. The
+    /// attribution checks (fingerprint share, error, band) stay at the loop's own state. About
+    /// `model_seeds` more simulations per candidate.
+    pub candidate_seeds: bool,
 }
 
 impl Default for CalibrateOptions {
@@ -131,6 +137,7 @@ impl Default for CalibrateOptions {
             unexplained_db: 10.0,
             model_seeds: 6,
             null_z: 0.5,
+            candidate_seeds: false,
         }
     }
 }
@@ -1178,6 +1185,26 @@ pub fn calibrate(
                 ea: pa.ea,
             };
             cands.push(make(format!("{na}+{nb}"), p, None)?);
+        }
+    }
+
+    // Scored like "no effect": the best of the same initial states ([`CalibrateOptions::
+    // candidate_seeds`]). A chaotic model's score from one initial state scatters by
+    // `null_spread`; "no effect" takes the best of `1 + model_seeds`, a candidate from one
+    // state would be handicapped by that scatter.
+    if opts.candidate_seeds {
+        let seeds = sim.seeds(opts.model_seeds as u64 + 1);
+        for c in cands.iter_mut().skip(1) {
+            let best = seeds[1..]
+                .par_iter()
+                .map(|&sd| {
+                    let s = sim.spectrum_seeded(&c.params, sd)?;
+                    Ok(fit_sensor(&m, &s, &r, c.sensor.resonance, w).1)
+                })
+                .collect::<Result<Vec<f64>>>()?
+                .into_iter()
+                .fold(c.rss, f64::min);
+            c.rss = best;
         }
     }
 
