@@ -1382,6 +1382,12 @@ pub fn calibrate(
         }),
         _ => false,
     };
+    // The best-scoring single candidate of an effect (of its variants).
+    let best_single = |name: &str| {
+        (1..n_single)
+            .filter(|&k| cands[k].effects.len() == 1 && cands[k].effects[0].name == name)
+            .min_by(|&a, &b| scores[a].total_cmp(&scores[b]))
+    };
     // A path resonance's own band ([`BandEvidence`]), against the plain model at its ea (a
     // single) or the other member's best single (a pair).
     let band: Vec<Option<BandEvidence>> = (0..cands.len())
@@ -1398,12 +1404,7 @@ pub fn calibrate(
                     sensor_model(&plain, &r, &sp)
                 }
                 Some(other) => {
-                    let Some(o) = (1..n_single)
-                        .filter(|&k| {
-                            cands[k].effects.len() == 1 && cands[k].effects[0].name == other.name
-                        })
-                        .min_by(|&a, &b| scores[a].total_cmp(&scores[b]))
-                    else {
+                    let Some(o) = best_single(&other.name) else {
                         return Ok(None);
                     };
                     sensor_model(&sim.spectrum(&cands[o].params)?, &r, &cands[o].sensor)
@@ -1465,10 +1466,7 @@ pub fn calibrate(
         let Some(other) = cands[pair].effects.iter().find(|e| e.name != member.name) else {
             return Ok(0.0);
         };
-        let Some(o) = (1..n_single)
-            .filter(|&i| cands[i].effects.len() == 1 && cands[i].effects[0].name == other.name)
-            .min_by(|&a, &b| scores[a].total_cmp(&scores[b]))
-        else {
+        let Some(o) = best_single(&other.name) else {
             return Ok(0.0);
         };
         let mut mask = vec![false; r.len()];
