@@ -1308,6 +1308,20 @@ pub fn calibrate(
             _ => near(&fam_wide, mask),
         }
     };
+    // Every candidate's fitted spectrum, and the plain model at its ea fitted to the record (its
+    // reference for the fingerprint share and the band).
+    let fitted: Vec<Vec<f64>> = cands
+        .iter()
+        .map(|c| Ok(sensor_model(&sim.spectrum(&c.params)?, &r, &c.sensor)))
+        .collect::<Result<_>>()?;
+    let plain_at: Vec<Vec<f64>> = cands
+        .iter()
+        .map(|c| {
+            let plain = sim.spectrum(&ElementParams::plain(c.params.ea, baseline_planetary))?;
+            let (sp, _) = fit_sensor(&m, &plain, &r, None, w);
+            Ok(sensor_model(&plain, &r, &sp))
+        })
+        .collect::<Result<_>>()?;
     let mut support: Vec<f64> = vec![1.0; cands.len()];
     let mut refused: Vec<Vec<String>> = vec![Vec::new(); cands.len()];
     // The colour rule's refusal, kept aside: the resonance's own band may stand for it.
@@ -1317,11 +1331,7 @@ pub fn calibrate(
         for e in &c.effects {
             fingerprint(e, &mut mask);
         }
-        let fc = sensor_model(&sim.spectrum(&c.params)?, &r, &c.sensor);
-        let plain = sim.spectrum(&ElementParams::plain(c.params.ea, baseline_planetary))?;
-        let (sp, _) = fit_sensor(&m, &plain, &r, None, w);
-        let f_none = sensor_model(&plain, &r, &sp);
-        support[ci] = improvement_share(&m, &f_none, &fc, &mask);
+        support[ci] = improvement_share(&m, &plain_at[ci], &fitted[ci], &mask);
         // A path stage colours what the gearbox makes: it must move at least
         // [`MIN_COLOURED_LINES`] of the plain model's lines by more than 3 dB relative to f1.
         // A narrow mode that lifts one weak line next to a tone is a tone, not a path.
@@ -1354,13 +1364,7 @@ pub fn calibrate(
     // Selection: a BIC on the deviance of the weighted robust score, `J_eff ln(score/J) +
     // k ln J_eff`; an effect must beat "none" by `bic_margin + null_z · null_spread` (the
     // model's own seed-to-seed scatter) and lower the plain RMS error of the table's estimate.
-    let rss_unw: Vec<f64> = cands
-        .iter()
-        .map(|c| {
-            let fc = sensor_model(&sim.spectrum(&c.params)?, &r, &c.sensor);
-            Ok(unit.score(&m, &fc))
-        })
-        .collect::<Result<_>>()?;
+    let rss_unw: Vec<f64> = fitted.iter().map(|fc| unit.score(&m, fc)).collect();
     let bic = |score: f64, k: usize| dev(score) + k as f64 * j_n.ln();
     let scores: Vec<f64> = cands.iter().map(|c| bic(c.rss, c.k)).collect();
     // "No effect" from the best of its initial states (its profile's best point, each seed).
@@ -1393,36 +1397,24 @@ pub fn calibrate(
     let band: Vec<Option<BandEvidence>> = (0..cands.len())
         .map(|i| {
             let c = &cands[i];
-            let Some(h) = c.sensor.resonance.filter(|_| i > 0) else {
-                return Ok(None);
-            };
+            let h = c.sensor.resonance.filter(|_| i > 0)?;
             let fref = match c.effects.iter().find(|e| e.name != PATH_RESONANCE) {
-                None => {
-                    let plain =
-                        sim.spectrum(&ElementParams::plain(c.params.ea, baseline_planetary))?;
-                    let (sp, _) = fit_sensor(&m, &plain, &r, None, w);
-                    sensor_model(&plain, &r, &sp)
-                }
-                Some(other) => {
-                    let Some(o) = best_single(&other.name) else {
-                        return Ok(None);
-                    };
-                    sensor_model(&sim.spectrum(&cands[o].params)?, &r, &cands[o].sensor)
-                }
+                None => &plain_at[i],
+                Some(other) => &fitted[best_single(&other.name)?],
             };
-            let fc = sensor_model(&sim.spectrum(&c.params)?, &r, &c.sensor);
+            let fc = &fitted[i];
             let half = (h.zeta * h.rho).max(1.0 / spectrum::GRID_PERIODS);
             let mask: Vec<bool> = r.iter().map(|x| (x - h.rho).abs() <= half).collect();
             let improved = (0..r.len())
                 .filter(|&j| mask[j] && (m[j] - fc[j]).powi(2) < (m[j] - fref[j]).powi(2))
                 .count();
-            Ok(Some(BandEvidence {
+            Some(BandEvidence {
                 points: mask.iter().filter(|b| **b).count(),
                 improved,
-                share: improvement_share(&m, &fref, &fc, &mask),
-            }))
+                share: improvement_share(&m, fref, fc, &mask),
+            })
         })
-        .collect::<Result<_>>()?;
+        .collect();
     // A path resonance alone stands on its band if it beats "no effect" by
     // [`BAND_MARGIN_FACTOR`] claim margins; a pair's resonance on its band alone (the pair
     // must still beat the best single by the margin).
@@ -1462,29 +1454,25 @@ pub fn calibrate(
     // model, or an element the resonance's colouring hides, is then judged where both are
     // fitted. (The pair's own checks — its fingerprint share, the coloured lines of its
     // resonance, the sidebands, the TSA — still apply.)
-    let given_share = |pair: usize, member: &Effect| -> Result<f64> {
-        let Some(other) = cands[pair].effects.iter().find(|e| e.name != member.name) else {
-            return Ok(0.0);
-        };
-        let Some(o) = best_single(&other.name) else {
-            return Ok(0.0);
+    let given_share = |pair: usize, member: &Effect| -> f64 {
+        let other = cands[pair].effects.iter().find(|e| e.name != member.name);
+        let Some(o) = other.and_then(|other| best_single(&other.name)) else {
+            return 0.0;
         };
         let mut mask = vec![false; r.len()];
         fingerprint(member, &mut mask);
-        let fo = sensor_model(&sim.spectrum(&cands[o].params)?, &r, &cands[o].sensor);
-        let fp = sensor_model(&sim.spectrum(&cands[pair].params)?, &r, &cands[pair].sensor);
-        Ok(improvement_share(&m, &fo, &fp, &mask))
+        improvement_share(&m, &fitted[o], &fitted[pair], &mask)
     };
     let member_shares: Vec<Vec<f64>> = cands
         .iter()
         .enumerate()
         .map(|(i, c)| {
             if c.effects.len() < 2 {
-                return Ok(Vec::new());
+                return Vec::new();
             }
             c.effects.iter().map(|e| given_share(i, e)).collect()
         })
-        .collect::<Result<_>>()?;
+        .collect();
     let margin_of = |c: &Fitted| {
         if c.effects.iter().any(|e| e.name == TOOTH_DAMAGE) {
             TOOTH_MARGIN_FACTOR * claim_margin
