@@ -255,8 +255,10 @@ pub const MIN_COLOURED_LINES: usize = 2;
 /// continuum between them, which the plain model may hold below its noise floor — so a strong
 /// mode between the lines improves the fit over a run of neighbouring points without moving
 /// [`MIN_COLOURED_LINES`] lines (seed 32 of the benchmark, record 23: a peaking mode at 2.16 f1,
-/// ζ 0.023, gain 8.2; ΔBIC −685, 95 % of the improvement off the lines). A mode fitted to a tone
-/// or to mains hum has a band of one to three grid points.
+/// ζ 0.023, gain 8.2; ΔBIC −685, 95 % of the improvement off the lines). The band's width alone
+/// does not keep tones out: over seeds 32–43 the resonance candidates of the 144 tone and
+/// mains-hum records had bands of 0–173 points (median 5 and 2), 33 of them 8 or more; none beat
+/// "no effect" by [`BAND_MARGIN_FACTOR`] margins (the best by 1.2), which is what keeps them out.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct BandEvidence {
     /// Grid points in the band.
@@ -1217,7 +1219,13 @@ pub fn calibrate(
     // a f1 ± c f3 (a = 0, 1, 2; c = 1, 2) for
     // planetary wear; ±1 grid point) must reach [`SUPPORT_SHARE`]; otherwise the candidate is
     // not eligible.
-    let f_none = sensor_model(&sim.spectrum(&cands[0].params)?, &r, &cands[0].sensor);
+    // Every candidate's fitted spectrum, and the plain model at its ea fitted to the record (its
+    // reference for the fingerprint share and the band).
+    let fitted: Vec<Vec<f64>> = cands
+        .iter()
+        .map(|c| Ok(sensor_model(&sim.spectrum(&c.params)?, &r, &c.sensor)))
+        .collect::<Result<_>>()?;
+    let f_none = &fitted[0];
     let near = |ratios: &[f64], mask: &mut [bool]| {
         for &x in ratios {
             if let Some(j) = grid_index(x) {
@@ -1308,12 +1316,6 @@ pub fn calibrate(
             _ => near(&fam_wide, mask),
         }
     };
-    // Every candidate's fitted spectrum, and the plain model at its ea fitted to the record (its
-    // reference for the fingerprint share and the band).
-    let fitted: Vec<Vec<f64>> = cands
-        .iter()
-        .map(|c| Ok(sensor_model(&sim.spectrum(&c.params)?, &r, &c.sensor)))
-        .collect::<Result<_>>()?;
     let plain_at: Vec<Vec<f64>> = cands
         .iter()
         .map(|c| {
