@@ -5,7 +5,7 @@
 //! default 2 — seed 1 is the one thresholds may be looked at on, report on another; `CL_OUT`
 //! JSON rows; `CL_KINDS` a comma list to run only some kinds; `CL_NULL_Z`, `CL_MARGIN` override
 //! `CalibrateOptions::null_z` and `bic_margin`, for tuning on seed 1 only; `CL_CANDIDATE_SEEDS=true`
-//! (or `false`) sets `CalibrateOptions::candidate_seeds`; `CL_INDICATORS_ONLY=1`
+//! (or `false`) sets `CalibrateOptions::candidate_seeds`, `CL_MEAN_SEEDS=true` `mean_seeds`; `CL_INDICATORS_ONLY=1`
 //! skips the closed loop and stores, as each row's `error` text, the record's tacho-less FM4
 //! and kurtosis, the drawn tooth damage and speed wander, visibility, each shaft's TSA FM4 and
 //! the tracked speed's relative standard deviation — every row then counts as failed in the
@@ -576,6 +576,7 @@ fn main() {
                 copts.null_z = env("CL_NULL_Z", copts.null_z);
                 copts.bic_margin = env("CL_MARGIN", copts.bic_margin);
                 copts.candidate_seeds = env("CL_CANDIDATE_SEEDS", copts.candidate_seeds);
+                copts.mean_seeds = env("CL_MEAN_SEEDS", copts.mean_seeds);
                 let rep = calibrate(&rec, &table, &copts)
                     .map_err(|e| e.to_string())?;
                 let named: Vec<String> = rep.effects.iter().map(|e| e.name.clone()).collect();
