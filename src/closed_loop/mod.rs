@@ -1200,12 +1200,13 @@ pub fn calibrate(
         }
     }
 
-    // Scored like "no effect": the best of the same initial states ([`CalibrateOptions::
-    // candidate_seeds`]). A chaotic model's score from one initial state scatters by
-    // `null_spread`; "no effect" takes the best of `1 + model_seeds`, a candidate from one
-    // state would be handicapped by that scatter.
+    // A chaotic model's score from one initial state scatters by `null_spread`; "no effect"
+    // takes the best of `1 + model_seeds`, so a candidate from one state is handicapped by
+    // that scatter. Optionally every candidate is scored from the same initial states: on its
+    // mean spectrum over them, "no effect" included ([`CalibrateOptions::mean_seeds`]), or by
+    // the best of them like "no effect" ([`CalibrateOptions::candidate_seeds`]).
+    let seeds = sim.seeds(opts.model_seeds as u64 + 1);
     if opts.mean_seeds {
-        let seeds = sim.seeds(opts.model_seeds as u64 + 1);
         for c in cands.iter_mut() {
             let spectra = seeds
                 .par_iter()
@@ -1218,7 +1219,6 @@ pub fn calibrate(
             c.rss = fit_sensor(&m, &mean, &r, c.sensor.resonance, w).1;
         }
     } else if opts.candidate_seeds {
-        let seeds = sim.seeds(opts.model_seeds as u64 + 1);
         for c in cands.iter_mut().skip(1) {
             let best = seeds[1..]
                 .par_iter()
