@@ -486,6 +486,14 @@ impl Simulator<'_> {
         Ok(s)
     }
 
+    /// [`Simulator::spectrum_seeded`] from each of `seeds`' initial states, in parallel.
+    fn spectra_seeded(&self, p: &ElementParams, seeds: &[u64]) -> Result<Vec<Vec<f64>>> {
+        seeds
+            .par_iter()
+            .map(|&sd| self.spectrum_seeded(p, sd))
+            .collect()
+    }
+
     /// The model's accelerometer series (dimensionless ẍ̄1, [`SIM_SPP`] samples per mesh period
     /// of stage 1) from the initial state of `seed`, after the transient.
     fn series(&self, p: &ElementParams, seed: u64) -> Result<Vec<f64>> {
@@ -760,6 +768,14 @@ struct Scatter {
     seed_spectra: Vec<Vec<f64>>,
 }
 
+/// The point-by-point mean of equal-length rows (spectra on the grid).
+fn pointwise_mean(rows: &[Vec<f64>]) -> Vec<f64> {
+    let n = rows.len() as f64;
+    (0..rows.first().map_or(0, Vec::len))
+        .map(|j| rows.iter().map(|row| row[j]).sum::<f64>() / n)
+        .collect()
+}
+
 /// The model's own seed-to-seed scatter at `p`: the plain model is simulated from
 /// `1 + extra` initial states (the main seed's spectrum is cached), each fitted to the record
 /// (gain, noise floor), and per grid point
@@ -782,11 +798,7 @@ fn model_scatter(
 ) -> Result<Scatter> {
     let n = r.len();
     let unit = Weights::unit(n);
-    let seeds = sim.seeds(extra as u64 + 1);
-    let spectra: Vec<Vec<f64>> = seeds
-        .par_iter()
-        .map(|&sd| sim.spectrum_seeded(&p, sd))
-        .collect::<Result<_>>()?;
+    let spectra = sim.spectra_seeded(&p, &sim.seeds(extra as u64 + 1))?;
     let fits: Vec<(SensorFit, Vec<f64>)> = spectra
         .iter()
         .map(|s| {
@@ -795,9 +807,8 @@ fn model_scatter(
         })
         .collect();
     let kk = fits.len() as f64;
-    let mean: Vec<f64> = (0..n)
-        .map(|j| fits.iter().map(|f| f.1[j]).sum::<f64>() / kk)
-        .collect();
+    let fitted: Vec<Vec<f64>> = fits.iter().map(|f| f.1.clone()).collect();
+    let mean = pointwise_mean(&fitted);
     let var: Vec<f64> = (0..n)
         .map(|j| {
             if kk < 2.0 {
@@ -1208,28 +1219,16 @@ pub fn calibrate(
     let seeds = sim.seeds(opts.model_seeds as u64 + 1);
     if opts.mean_seeds {
         for c in cands.iter_mut() {
-            let spectra = seeds
-                .par_iter()
-                .map(|&sd| sim.spectrum_seeded(&c.params, sd))
-                .collect::<Result<Vec<Vec<f64>>>>()?;
-            let n = spectra.len() as f64;
-            let mean: Vec<f64> = (0..spectra[0].len())
-                .map(|j| spectra.iter().map(|s| s[j]).sum::<f64>() / n)
-                .collect();
+            let mean = pointwise_mean(&sim.spectra_seeded(&c.params, &seeds)?);
             c.rss = fit_sensor(&m, &mean, &r, c.sensor.resonance, w).1;
         }
     } else if opts.candidate_seeds {
         for c in cands.iter_mut().skip(1) {
-            let best = seeds[1..]
-                .par_iter()
-                .map(|&sd| {
-                    let s = sim.spectrum_seeded(&c.params, sd)?;
-                    Ok(fit_sensor(&m, &s, &r, c.sensor.resonance, w).1)
-                })
-                .collect::<Result<Vec<f64>>>()?
-                .into_iter()
+            c.rss = sim
+                .spectra_seeded(&c.params, &seeds[1..])?
+                .iter()
+                .map(|s| fit_sensor(&m, s, &r, c.sensor.resonance, w).1)
                 .fold(c.rss, f64::min);
-            c.rss = best;
         }
     }
 
