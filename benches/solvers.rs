@@ -621,11 +621,11 @@ fn max_err(a: &[f64], b: &[f64], dim: usize, ncomp: usize) -> f64 {
 }
 
 // ---------------------------------------------------------------------------------------------
-// 1. Single mesh with backlash: exact reference (`tests/support/one_mesh.rs`, shared with
+// 1. Single mesh with backlash: exact reference (`crates/core/tests/support/one_mesh.rs`, shared with
 //    tests/physics.rs)
 // ---------------------------------------------------------------------------------------------
 
-#[path = "../tests/support/one_mesh.rs"]
+#[path = "../crates/core/tests/support/one_mesh.rs"]
 mod one_mesh;
 use one_mesh::{OneMesh, one_mesh_assembly};
 

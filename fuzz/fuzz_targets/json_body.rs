@@ -1,6 +1,9 @@
 #![no_main]
-//! `cargo fuzz run json_body`: see `gearwear::fuzzing::json_body` for what it feeds and checks.
+//! `cargo fuzz run json_body`: see `json_body` in `fuzz/harness.rs` for what it feeds and checks.
 
 use libfuzzer_sys::fuzz_target;
 
-fuzz_target!(|data: &[u8]| gearwear::fuzzing::json_body(data));
+#[path = "../harness.rs"]
+mod harness;
+
+fuzz_target!(|data: &[u8]| harness::json_body(data));

@@ -1,6 +1,9 @@
 #![no_main]
-//! `cargo fuzz run model_config`: see `gearwear::fuzzing::model_config` for what it feeds and checks.
+//! `cargo fuzz run model_config`: see `model_config` in `fuzz/harness.rs` for what it feeds and checks.
 
 use libfuzzer_sys::fuzz_target;
 
-fuzz_target!(|data: &[u8]| gearwear::fuzzing::model_config(data));
+#[path = "../harness.rs"]
+mod harness;
+
+fuzz_target!(|data: &[u8]| harness::model_config(data));

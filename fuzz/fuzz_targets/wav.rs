@@ -1,6 +1,9 @@
 #![no_main]
-//! `cargo fuzz run wav`: see `gearwear::fuzzing::wav` for what it feeds and checks.
+//! `cargo fuzz run wav`: see `wav` in `fuzz/harness.rs` for what it feeds and checks.
 
 use libfuzzer_sys::fuzz_target;
 
-fuzz_target!(|data: &[u8]| gearwear::fuzzing::wav(data));
+#[path = "../harness.rs"]
+mod harness;
+
+fuzz_target!(|data: &[u8]| harness::wav(data));

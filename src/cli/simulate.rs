@@ -11,8 +11,9 @@ use super::common::{
     RigArgs, SolveArgs, parse_range, planetary_of, progress_bar, wear, write_or_print,
 };
 use crate::analysis::bifurcation::{self, grid};
-use crate::analysis::report::{plot_run, simulate_report};
+use crate::analysis::report::simulate_report;
 use crate::plot;
+use crate::plot::plot_run;
 
 #[derive(Debug, Args)]
 pub struct SimulateArgs {

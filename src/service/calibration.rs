@@ -21,9 +21,9 @@ use super::records::{
     Decoded, body_format, check_machine_id, decode, json_response, parse_query, problem_from_error,
     read_body,
 };
-use super::time::rfc3339;
 use crate::keys::Scope;
 use crate::store::{CalibrationRow, new_id, now_ms};
+use crate::time::rfc3339;
 
 /// The answer body: the report plus the ids the service gave it.
 fn body(c: &CalibrationRow) -> Value {

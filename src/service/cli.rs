@@ -197,9 +197,9 @@ pub fn keys_cmd(a: KeysArgs) -> Result<()> {
                         "{}\t{}\t{}\t{}\t{}",
                         k.id,
                         Scope::join(&k.scopes),
-                        super::time::rfc3339(k.created_at),
+                        crate::time::rfc3339(k.created_at),
                         k.revoked_at
-                            .map(super::time::rfc3339)
+                            .map(crate::time::rfc3339)
                             .unwrap_or_else(|| "-".into()),
                         k.label
                     );

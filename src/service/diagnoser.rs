@@ -30,7 +30,7 @@ impl MachineCalibration {
     pub fn from_row(c: &crate::store::CalibrationRow) -> Self {
         MachineCalibration {
             id: c.id.clone(),
-            calibrated_at: super::time::rfc3339(c.created_at),
+            calibrated_at: crate::time::rfc3339(c.created_at),
             effects: serde_json::from_str(&c.effects).unwrap_or(Value::Array(vec![])),
         }
     }

@@ -35,7 +35,6 @@ use super::diagnoser::Diagnoser;
 use super::error::{ApiError, ApiResult};
 use super::read::json_with_etag;
 use super::records::{json_response, read_body};
-use super::time::rfc3339;
 use crate::diagnosis::DiagnoseOptions;
 use crate::gearbox::description::{GearboxDescription, MAX_DESCRIPTION_BYTES, TextFormat};
 use crate::gearbox::{Gearbox, PAPER_RIG};
@@ -43,6 +42,7 @@ use crate::keys::Scope;
 use crate::signature::precompute::{PrecomputeSpec, default_grid, partial_path, precompute};
 use crate::signature::{SignatureTable, SimulationSettings};
 use crate::store::{GearboxRow, PutOutcome, StoreError, new_id, now_ms};
+use crate::time::rfc3339;
 
 /// Id of the built-in gearbox: the first paper's rig.
 pub const BUILTIN_ID: &str = "wang2019";

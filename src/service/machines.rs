@@ -29,11 +29,11 @@ use super::error::{ApiError, ApiResult};
 use super::gearboxes::{BUILTIN_ID, check_gearbox_id};
 use super::read::json_with_etag;
 use super::records::{check_machine_id, read_body};
-use super::time::rfc3339;
 use crate::gearbox::Gearbox;
 use crate::keys::Scope;
 use crate::novelty::{MIN_BASELINE_RECORDS, MachineBaseline, RecordFeatures};
 use crate::store::{GearboxRow, MachineConfig, MachineRow, now_ms};
+use crate::time::rfc3339;
 
 /// Largest configuration or baseline request body.
 const SMALL_BODY: usize = 64 * 1024;

@@ -36,7 +36,6 @@ pub mod metrics;
 pub mod read;
 pub mod records;
 pub mod spectrum;
-pub mod time;
 pub mod webhooks;
 
 use crate::configuration::Settings;

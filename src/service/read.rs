@@ -12,8 +12,8 @@ use super::auth::Caller;
 use super::error::{ApiError, ApiResult};
 use super::gearboxes::BUILTIN_ID;
 use super::records::check_machine_id;
-use super::time::{parse_rfc3339, rfc3339};
 use crate::store::{DiagnosisRow, MachineRow, novelty_json, wear_json};
+use crate::time::{parse_rfc3339, rfc3339};
 
 /// How many diagnoses the machine view's wear trend shows.
 const TREND_POINTS: i64 = 200;

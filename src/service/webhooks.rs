@@ -24,9 +24,9 @@ use super::AppState;
 use super::auth::Caller;
 use super::error::{ApiError, ApiResult};
 use super::records::read_body;
-use super::time::rfc3339;
 use crate::keys::{self, Scope};
 use crate::store::{AttemptRow, DeliveryRow, Outcome, WebhookRow, new_id, now_ms};
+use crate::time::rfc3339;
 
 /// Events a subscription may ask for.
 pub const EVENTS: [&str; 2] = ["diagnosis.created", "wear.threshold_crossed"];

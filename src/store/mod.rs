@@ -332,7 +332,7 @@ pub fn ingest_events(prev_level: &str, ing: &Ingest, event_id: &str) -> Vec<(Str
         "machine_id": d.machine_id,
         "diagnosis_id": d.id,
         "record_id": d.record_id,
-        "created_at": crate::service::time::rfc3339(d.created_at),
+        "created_at": crate::time::rfc3339(d.created_at),
         "wear_degree": wear_json(d),
         "alert_level": d.alert_level,
         "motion_state": d.motion_state,

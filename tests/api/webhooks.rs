@@ -363,7 +363,7 @@ async fn receiver_down_then_back(b: Backend) {
     let log = delivery_log_when_settled(&app, &id).await;
     let ds = log["deliveries"].as_array().unwrap();
     assert_eq!(ds.len(), diagnoses.len(), "{log:#}");
-    let ms = |t: &Value| gearwear::service::time::parse_rfc3339(t.as_str().unwrap()).unwrap();
+    let ms = |t: &Value| gearwear::time::parse_rfc3339(t.as_str().unwrap()).unwrap();
     let mut summary = Vec::new();
     for d in ds {
         assert_eq!(d["status"], "delivered", "{d:#}");

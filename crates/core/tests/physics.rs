@@ -4,10 +4,10 @@
 
 use std::f64::consts::TAU;
 
-use gearwear::analysis::simulate::{RunSpec, Transient, run, run_system};
-use gearwear::gearbox::{Gearbox, GearboxDescription};
-use gearwear::model::{Load, LoadSchedule, Wear};
-use gearwear::solver::{
+use gearwear_core::analysis::simulate::{RunSpec, Transient, run, run_system};
+use gearwear_core::gearbox::{Gearbox, GearboxDescription};
+use gearwear_core::model::{Load, LoadSchedule, Wear};
+use gearwear_core::solver::{
     Dopri5, Dopri5Options, Integrator, OdeSystem, Rk4, advance_to, sample_uniform,
 };
 use nalgebra::{DMatrix, DVector};
@@ -667,8 +667,8 @@ impl OdeSystem for Ueda {
 fn classify_run<S: OdeSystem>(
     sys: &S,
     periods: usize,
-) -> gearwear::analysis::motion::Classification {
-    use gearwear::analysis::motion::{ClassifyOptions, classify_forced};
+) -> gearwear_core::analysis::motion::Classification {
+    use gearwear_core::analysis::motion::{ClassifyOptions, classify_forced};
     let spec = RunSpec {
         omega1: 1.0,
         periods,
@@ -701,7 +701,7 @@ fn classify_run<S: OdeSystem>(
 
 #[test]
 fn known_motion_states_are_classified() {
-    use gearwear::analysis::motion::MotionState;
+    use gearwear_core::analysis::motion::MotionState;
     // A damped linear oscillator under harmonic forcing: period-1, negative exponent.
     let p = OneMesh {
         c: 0.1,
@@ -733,7 +733,7 @@ fn known_motion_states_are_classified() {
 
 #[test]
 fn load_step_is_integrated_exactly_by_both_solvers() {
-    use gearwear::solver::{Rodas4, Rodas4Options};
+    use gearwear_core::solver::{Rodas4, Rodas4Options};
     // x'' + c x' + x = F(τ), F = 0.1 before τ = 7.3 and 0.6 after; no backlash, no forcing.
     let before = OneMesh {
         c: 0.1,

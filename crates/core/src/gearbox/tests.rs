@@ -434,7 +434,7 @@ fn unequal_planet_spacing_is_a_warning_not_an_error() {
 
 #[test]
 fn committed_descriptions_resolve() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/gearboxes");
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/gearboxes");
     let mut n = 0;
     for entry in std::fs::read_dir(dir).unwrap() {
         let p = entry.unwrap().path();
@@ -459,7 +459,7 @@ fn committed_descriptions_resolve() {
 fn the_sensor_stage_picks_the_simulated_element() {
     let two = std::fs::read_to_string(
         std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("configs/gearboxes/two-stage-parallel.toml"),
+            .join("../../configs/gearboxes/two-stage-parallel.toml"),
     )
     .unwrap();
     let m = parse(&two)

@@ -22,7 +22,7 @@ use super::wear::Wear;
 use crate::error::{Error, Result};
 
 /// The committed default configuration (`configs/model_a.toml`).
-pub const DEFAULT_CONFIG: &str = include_str!("../../configs/model_a.toml");
+pub const DEFAULT_CONFIG: &str = include_str!("../../../../configs/model_a.toml");
 
 /// One gear of Table 1.
 #[derive(Debug, Clone, Serialize, Deserialize)]

@@ -6,7 +6,7 @@
 //! width `b`: linear in each region, so each region has a closed form and only the switches
 //! between regions are searched (bisection to 1e-14).
 
-use gearwear::model::{Assembly, Damping, Dof, Element, Load, LoadSchedule, StiffnessShape};
+use gearwear_core::model::{Assembly, Damping, Dof, Element, Load, LoadSchedule, StiffnessShape};
 
 /// x'' + c x' + k f_b(x) = F + a Ω² sin(Ω τ + φ), solved region by region in closed form.
 #[derive(Clone, Copy)]

@@ -1553,6 +1553,7 @@ mod likelihood_tests {
     #[test]
     fn grouped_log_likelihood_matches_per_feature_sum() {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../..")
             .join("signatures")
             .join("model_a_accel.json");
         let table = SignatureTable::load(&path).expect("committed table");

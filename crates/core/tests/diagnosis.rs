@@ -5,16 +5,16 @@ use std::f64::consts::TAU;
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
-use gearwear::Error;
-use gearwear::diagnosis::{DiagnoseOptions, Matcher, diagnose, diagnose_with_spectrum};
-use gearwear::gearbox::Gearbox;
-use gearwear::record::{Column, Format, ReadOptions, Record, encode_wav, read_record};
-use gearwear::signal::Window;
-use gearwear::signature::precompute::{MeasurementSpec, simulate_measurement};
-use gearwear::signature::{SensorQuantity, SignatureTable};
+use gearwear_core::Error;
+use gearwear_core::diagnosis::{DiagnoseOptions, Matcher, diagnose, diagnose_with_spectrum};
+use gearwear_core::gearbox::Gearbox;
+use gearwear_core::record::{Column, Format, ReadOptions, Record, encode_wav, read_record};
+use gearwear_core::signal::Window;
+use gearwear_core::signature::precompute::{MeasurementSpec, simulate_measurement};
+use gearwear_core::signature::{SensorQuantity, SignatureTable};
 
 fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
 fn table() -> &'static SignatureTable {
@@ -190,7 +190,8 @@ fn the_search_spectrum_handed_back_is_the_records_hann_spectrum() {
     let (d, s) = diagnose_with_spectrum(&rec, table(), &m, &opts).unwrap();
     let s = s.expect("a 25 600-sample record is searched on its whole spectrum");
     let want =
-        gearwear::signal::amplitude_spectrum(&rec.samples, rec.sample_rate, Window::Hann).unwrap();
+        gearwear_core::signal::amplitude_spectrum(&rec.samples, rec.sample_rate, Window::Hann)
+            .unwrap();
     assert_eq!((s.freq, s.amplitude), (want.freq, want.amplitude));
     let plain = diagnose(&rec, table(), &opts).unwrap();
     assert_eq!(
@@ -353,8 +354,8 @@ fn a_real_record_from_another_gearbox_gets_an_answer_or_a_clear_error() {
 
 #[test]
 fn precompute_is_deterministic_and_resumes_from_its_partial_file() {
-    use gearwear::signature::precompute::{PrecomputeSpec, precompute};
-    use gearwear::signature::table::{Grid, SimulationSettings};
+    use gearwear_core::signature::precompute::{PrecomputeSpec, precompute};
+    use gearwear_core::signature::table::{Grid, SimulationSettings};
     use std::sync::atomic::{AtomicUsize, Ordering};
     let spec = PrecomputeSpec {
         gearbox: std::sync::Arc::new(Gearbox::paper_rig()),

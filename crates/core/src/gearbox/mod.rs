@@ -27,7 +27,7 @@ pub use kinematics::{Fixed, Kinematics, Stage, Topology};
 use crate::model::{Assembly, Wear};
 
 /// The first paper's rig as a description (committed as `configs/gearboxes/wang2019.toml`).
-pub const PAPER_RIG: &str = include_str!("../../configs/gearboxes/wang2019.toml");
+pub const PAPER_RIG: &str = include_str!("../../../../configs/gearboxes/wang2019.toml");
 
 /// A validated, resolved gearbox: description, topology, kinematics ratios and physics.
 #[derive(Debug, Clone, Serialize)]

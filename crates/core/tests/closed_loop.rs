@@ -3,10 +3,10 @@
 //! the library is reported as unexplained, not misattributed; a clean record claims nothing.
 //! The effects are configured here only; `calibrate` sees nothing but the record.
 
-use gearwear::closed_loop::virtual_rig::{RigEffects, RigSpec, generate};
-use gearwear::closed_loop::{CalibrateOptions, CalibrationReport, calibrate};
-use gearwear::signature::SignatureTable;
-use gearwear::signature::table::DEFAULT_TABLE_PATH;
+use gearwear_core::closed_loop::virtual_rig::{RigEffects, RigSpec, generate};
+use gearwear_core::closed_loop::{CalibrateOptions, CalibrationReport, calibrate};
+use gearwear_core::signature::SignatureTable;
+use gearwear_core::signature::table::DEFAULT_TABLE_PATH;
 
 const EA: f64 = 0.3;
 
@@ -30,7 +30,7 @@ fn rig_record(
     seed: u64,
     gain: f64,
     snr_db: f64,
-) -> gearwear::record::Record {
+) -> gearwear_core::record::Record {
     let spec = RigSpec {
         ea: EA,
         omega1: 1.0,
@@ -321,7 +321,7 @@ fn a_mode_between_the_lines_is_named_on_its_band() {
     let band = c.band.expect("a resonance candidate carries its band");
     // The plain model's lines alone would not carry it (share 0.03 when this was written).
     assert!(
-        c.fingerprint_share < gearwear::closed_loop::SUPPORT_SHARE,
+        c.fingerprint_share < gearwear_core::closed_loop::SUPPORT_SHARE,
         "{c:?}"
     );
     assert!(band.holds(), "{band:?}");
@@ -340,7 +340,7 @@ fn a_mode_between_the_lines_is_named_on_its_band() {
 #[test]
 fn a_damaged_tooth_is_claimed_at_its_shaft() {
     let table = SignatureTable::load(std::path::Path::new(DEFAULT_TABLE_PATH)).unwrap();
-    let gears = gearwear::closed_loop::effects::reference_gears(table.gearbox());
+    let gears = gearwear_core::closed_loop::effects::reference_gears(table.gearbox());
     let pinion = &gears[0];
     let r = run(
         RigEffects {
@@ -450,7 +450,7 @@ fn mains_hum_is_unexplained_and_called_electrical_pickup() {
 /// variance on every feature leaves a wide posterior.
 #[test]
 fn a_feature_shift_moves_the_table_posterior_the_right_way() {
-    use gearwear::diagnosis::{DiagnoseOptions, Matcher, diagnose, diagnose_shifted};
+    use gearwear_core::diagnosis::{DiagnoseOptions, Matcher, diagnose, diagnose_shifted};
     let table = SignatureTable::load(std::path::Path::new(DEFAULT_TABLE_PATH)).unwrap();
     let rec = rig_record(&table, RigEffects::default(), 2010, 1.0, 30.0);
     let opts = DiagnoseOptions::default();
@@ -476,7 +476,7 @@ fn a_feature_shift_moves_the_table_posterior_the_right_way() {
     );
 
     let vague = diagnose_shifted(&rec, &table, &opts, &zero, &vec![100.0; nf]).unwrap();
-    let width = |d: &gearwear::diagnosis::Diagnosis| d.wear_degree.upper - d.wear_degree.lower;
+    let width = |d: &gearwear_core::diagnosis::Diagnosis| d.wear_degree.upper - d.wear_degree.lower;
     assert!(
         width(&vague) > 2.0 * width(&plain),
         "{} vs {}",
@@ -551,7 +551,7 @@ fn speed_wander_is_not_claimed_as_the_input_shafts_modulation() {
 #[test]
 fn a_slow_shafts_modulation_is_named_at_its_shaft() {
     let table = SignatureTable::load(std::path::Path::new(DEFAULT_TABLE_PATH)).unwrap();
-    let gears = gearwear::closed_loop::effects::reference_gears(table.gearbox());
+    let gears = gearwear_core::closed_loop::effects::reference_gears(table.gearbox());
     let gear = &gears[1];
     assert!((gear.shaft_ratio - 0.01).abs() < 1e-9);
     let r = run(

@@ -5,8 +5,8 @@ use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use gearwear::Error;
-use gearwear::plot::{self, Panel, Series};
+use gearwear_core::Error;
+use gearwear_plot::{self as plot, Panel, Series};
 
 /// A fresh directory under the system temp dir (kept, so figures can be inspected).
 fn out_dir(name: &str) -> PathBuf {
@@ -48,7 +48,7 @@ fn check_svg(path: &Path, title: &str) {
 }
 
 /// Run `f` for a PNG and an SVG in a fresh (nested, not yet existing) directory.
-fn both(name: &str, title: &str, size: (u32, u32), f: impl Fn(&Path) -> gearwear::Result<()>) {
+fn both(name: &str, title: &str, size: (u32, u32), f: impl Fn(&Path) -> gearwear_core::Result<()>) {
     let d = out_dir(name).join("nested");
     let png = d.join(format!("{name}.png"));
     let svg = d.join(format!("{name}.svg"));
@@ -68,7 +68,7 @@ fn cleanup(d: &Path) {
     }
 }
 
-fn expect_plot_err(r: gearwear::Result<()>, needle: &str) {
+fn expect_plot_err(r: gearwear_core::Result<()>, needle: &str) {
     match r {
         Err(Error::Plot { reason, .. }) => {
             assert!(

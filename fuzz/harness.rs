@@ -7,16 +7,16 @@
 //! reports as a crash; a parser that panics by itself is a crash too. See
 //! `docs/reliability/fuzzing.md`.
 
-use crate::configuration::{Limits, Settings};
-use crate::gearbox::Gearbox;
-use crate::model::Wear;
-use crate::model::rig_b::{ModelBConfig, ModelBOptions};
-use crate::record::{
+use gearwear::configuration::{Limits, Settings};
+use gearwear::gearbox::Gearbox;
+use gearwear::model::Wear;
+use gearwear::model::rig_b::{ModelBConfig, ModelBOptions};
+use gearwear::record::{
     Column, Format, MAX_DECOMPRESSED_BYTES, MultiRecord, ReadOptions, Record, gunzip, parse_record,
     parse_record_channels,
 };
-use crate::service::error::ApiError;
-use crate::service::records::{BodyFormat, Decoded, JsonRecord, decode, parse_query};
+use gearwear::service::error::ApiError;
+use gearwear::service::records::{BodyFormat, Decoded, JsonRecord, decode, parse_query};
 
 /// Sample rate the harnesses pass where a format needs one (Hz).
 const FS: f64 = 25_600.0;
@@ -87,7 +87,7 @@ pub fn check_decoded(d: &Decoded, limits: &Limits, body_len: usize, what: &str) 
     }
     if let Some(t) = &d.recorded_at {
         assert!(
-            crate::service::time::parse_rfc3339(t).is_some(),
+            gearwear::time::parse_rfc3339(t).is_some(),
             "{what}: recorded_at `{t}` accepted"
         );
     }
@@ -126,7 +126,7 @@ pub fn check_record(r: &Record, opts: &ReadOptions, max_samples: usize, what: &s
 /// asked for when `opts.column` is given. An error names no CLI flag (`--…`) unless the input
 /// itself holds `--` (a header name, a bad number): the service sends these to HTTP clients.
 pub fn check_channels(
-    r: &crate::Result<MultiRecord>,
+    r: &gearwear::Result<MultiRecord>,
     opts: &ReadOptions,
     data: &[u8],
     max_samples: usize,
@@ -403,7 +403,7 @@ pub fn csv_gz(data: &[u8]) {
 
 /// Raw little-endian `f32` as the service (`application/octet-stream`) and the CLI read it.
 /// Checks: accepted exactly when the length is a positive multiple of 4, every value is finite,
-/// the samples pass [`crate::record::check_signal`] (not flat, not clipped) and a rate is
+/// the samples pass [`gearwear::record::check_signal`] (not flat, not clipped) and a rate is
 /// given; then `len/4` samples equal to the input's values.
 pub fn f32_raw(data: &[u8]) {
     service_binary(BodyFormat::F32, data);
@@ -414,8 +414,10 @@ pub fn f32_raw(data: &[u8]) {
     let valid = !data.is_empty()
         && data.len().is_multiple_of(4)
         && values.iter().all(|v| v.is_finite())
-        && crate::record::check_signal(&values.iter().map(|&v| f64::from(v)).collect::<Vec<_>>())
-            .is_ok();
+        && gearwear::record::check_signal(
+            &values.iter().map(|&v| f64::from(v)).collect::<Vec<_>>(),
+        )
+        .is_ok();
     let o = opts(Format::F32, Some(FS), None);
     match parse_record(data, Format::F32, &o, "fuzz") {
         Ok(r) => {

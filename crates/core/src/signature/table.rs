@@ -36,7 +36,9 @@ pub fn default_table_path() -> std::path::PathBuf {
     if local.exists() {
         local
     } else {
-        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(DEFAULT_TABLE_PATH)
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../..")
+            .join(DEFAULT_TABLE_PATH)
     }
 }
 

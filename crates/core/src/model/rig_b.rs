@@ -31,7 +31,7 @@ use super::system::DimensionlessModel;
 use crate::error::{Error, Result};
 
 /// The committed default configuration (`configs/model_b.toml`).
-pub const DEFAULT_CONFIG: &str = include_str!("../../configs/model_b.toml");
+pub const DEFAULT_CONFIG: &str = include_str!("../../../../configs/model_b.toml");
 
 /// Radians to arc minutes.
 pub const ARCMIN_PER_RAD: f64 = 180.0 * 60.0 / PI;

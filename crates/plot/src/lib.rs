@@ -21,7 +21,10 @@ use plotters::prelude::*;
 use plotters::style::FontStyle;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use crate::error::Error;
+use gearwear_core::{Error, Result};
+
+pub mod run;
+pub use run::plot_run;
 
 /// Default figure size in pixels (width, height) for single-chart figures.
 pub const DEFAULT_SIZE: (u32, u32) = (1000, 600);
@@ -29,7 +32,7 @@ pub const DEFAULT_SIZE: (u32, u32) = (1000, 600);
 /// Font family used everywhere (registered from the embedded DejaVu Sans).
 const FONT: &str = "sans-serif";
 
-static FONT_BYTES: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
+static FONT_BYTES: &[u8] = include_bytes!("../../../assets/fonts/DejaVuSans.ttf");
 
 /// Register the embedded font exactly once; later calls return the first outcome.
 fn ensure_font() -> std::result::Result<(), String> {
@@ -77,7 +80,7 @@ pub fn lines(
     x_label: &str,
     y_label: &str,
     series: &[Series],
-) -> crate::Result<()> {
+) -> Result<()> {
     let mut c = Chart::new(title, x_label, y_label);
     let legend = series.len() > 1;
     for (i, s) in series.iter().enumerate() {
@@ -98,7 +101,7 @@ pub fn phase_portrait(
     x: &[f64],
     v: &[f64],
     poincare: Option<(&[f64], &[f64])>,
-) -> crate::Result<()> {
+) -> Result<()> {
     let mut c = Chart::new(title, "x", "ẋ");
     c.layers.push(Layer::Line {
         label: poincare.map(|_| "trajectory".to_string()),
@@ -125,7 +128,7 @@ pub fn scatter(
     y_label: &str,
     x: &[f64],
     y: &[f64],
-) -> crate::Result<()> {
+) -> Result<()> {
     let mut c = Chart::new(title, x_label, y_label);
     c.layers.push(Layer::Dots {
         label: None,
@@ -147,7 +150,7 @@ pub fn spectrum(
     markers: &[(&str, f64)],
     x_max: f64,
     log_y: bool,
-) -> crate::Result<()> {
+) -> Result<()> {
     if !(x_max.is_finite() && x_max > 0.0) {
         return Err(plot_err(
             path,
@@ -176,7 +179,7 @@ pub fn bifurcation(
     y_label: &str,
     param: &[f64],
     value: &[f64],
-) -> crate::Result<()> {
+) -> Result<()> {
     let mut c = Chart::new(title, x_label, y_label);
     c.layers.push(Layer::Dots {
         label: None,
@@ -191,13 +194,7 @@ pub fn bifurcation(
 ///
 /// The figure grows with the grid (at least [`DEFAULT_SIZE`], about 640 × 420 px per panel) so
 /// that the labels stay readable. Unused grid cells stay blank.
-pub fn panels(
-    path: &Path,
-    title: &str,
-    rows: usize,
-    cols: usize,
-    panels: &[Panel],
-) -> crate::Result<()> {
+pub fn panels(path: &Path, title: &str, rows: usize, cols: usize, panels: &[Panel]) -> Result<()> {
     if rows == 0 || cols == 0 {
         return Err(plot_err(
             path,
@@ -263,7 +260,7 @@ pub fn band(
     lower: &[f64],
     upper: &[f64],
     thresholds: &[(&str, f64)],
-) -> crate::Result<()> {
+) -> Result<()> {
     let mut c = Chart::new(title, x_label, y_label);
     let n = x.len().min(lower.len()).min(upper.len());
     let tri: Vec<Option<(f64, f64, f64)>> = (0..n)
@@ -530,7 +527,7 @@ fn render(
     rows: usize,
     cols: usize,
     charts: &[Chart],
-) -> crate::Result<()> {
+) -> Result<()> {
     let format = match path
         .extension()
         .and_then(|e| e.to_str())

@@ -3,15 +3,15 @@
 //! explicit reference on Model B, a free-body static balance, the mesh-edge times from the
 //! tooth counts, and the return-difference formula against a simulated reversal.
 
-use gearwear::analysis::model_b::{
+use gearwear_core::analysis::model_b::{
     Prepared, SimSpec, SolverKind, SolverSettings, load_drop_comparison, return_difference_formula,
     shock_times, simulate, simulate_reversal,
 };
-use gearwear::model::{
+use gearwear_core::model::{
     Assembly, Damping, Dof, Element, Load, LoadSchedule, ModelBConfig, ModelBOptions,
     StiffnessForm, StiffnessShape,
 };
-use gearwear::solver::{
+use gearwear_core::solver::{
     Dopri5, Dopri5Options, Integrator, OdeSystem, Rodas4, Rodas4Options, advance_to, sample_uniform,
 };
 
@@ -78,7 +78,7 @@ fn rodas4_dense_output_matches_the_exact_solution() {
     };
     let mut integ = Rodas4::new(&sys, 0.0, &y0, opts).unwrap();
     let mut worst = 0.0_f64;
-    gearwear::solver::sample_uniform(&mut integ, 0.0, 0.01, 3.0, |_, t, y| {
+    gearwear_core::solver::sample_uniform(&mut integ, 0.0, 0.01, 3.0, |_, t, y| {
         let ex = sys.exact(t, y0);
         worst = worst.max((y[0] - ex[0]).abs()).max((y[1] - ex[1]).abs());
     })
@@ -170,7 +170,7 @@ fn static_operating_point_matches_the_free_body_balance() {
     assert!((dte + 0.5 * rd).abs() < 1e-9 * rd, "{dte} vs {}", -0.5 * rd);
 }
 
-fn sim(kind: SolverKind, rtol: f64, duration: f64) -> gearwear::analysis::model_b::Record {
+fn sim(kind: SolverKind, rtol: f64, duration: f64) -> gearwear_core::analysis::model_b::Record {
     let cfg = ModelBConfig::default_rig();
     let p = Prepared::new(&cfg, &ModelBOptions::default()).unwrap();
     let spec = SimSpec {
