@@ -6,7 +6,7 @@
 use gearwear_core::closed_loop::virtual_rig::{RigEffects, RigSpec, generate};
 use gearwear_core::closed_loop::{CalibrateOptions, CalibrationReport, calibrate};
 use gearwear_core::signature::SignatureTable;
-use gearwear_core::signature::table::DEFAULT_TABLE_PATH;
+use gearwear_core::signature::table::default_table_path;
 
 const EA: f64 = 0.3;
 
@@ -16,7 +16,7 @@ fn run(effects: RigEffects, seed: u64, gain: f64) -> CalibrationReport {
 
 /// `run` with the input-shaft rate given (Ω1 = 1 is 30 Hz on the paper's rig).
 fn run_with(effects: RigEffects, seed: u64, gain: f64, shaft_hz: Option<f64>) -> CalibrationReport {
-    let table = SignatureTable::load(std::path::Path::new(DEFAULT_TABLE_PATH)).unwrap();
+    let table = SignatureTable::load(&default_table_path()).unwrap();
     let rec = rig_record(&table, effects, seed, gain, 20.0);
     let mut opts = CalibrateOptions::default();
     opts.diagnose.shaft_hz = shaft_hz;
@@ -90,7 +90,7 @@ fn eccentricity_is_named_and_fixes_the_wear() {
 /// shaft's modulation with the error cut.
 #[test]
 fn the_seeded_scores_keep_the_clean_and_eccentric_answers() {
-    let table = SignatureTable::load(std::path::Path::new(DEFAULT_TABLE_PATH)).unwrap();
+    let table = SignatureTable::load(&default_table_path()).unwrap();
     let clean = rig_record(&table, RigEffects::default(), 2000, 0.03, 20.0);
     let eccentric = rig_record(
         &table,
@@ -291,7 +291,7 @@ fn a_resonance_below_the_mesh_is_named_at_its_frequency() {
 /// lines and the old rule named it too: this record is the one the band is for.)
 #[test]
 fn a_mode_between_the_lines_is_named_on_its_band() {
-    let table = SignatureTable::load(std::path::Path::new(DEFAULT_TABLE_PATH)).unwrap();
+    let table = SignatureTable::load(&default_table_path()).unwrap();
     let spec = RigSpec {
         ea: EA,
         omega1: 1.3,
@@ -339,7 +339,7 @@ fn a_mode_between_the_lines_is_named_on_its_band() {
 /// effect at the damaged gear's shaft is claimed and the error drops.
 #[test]
 fn a_damaged_tooth_is_claimed_at_its_shaft() {
-    let table = SignatureTable::load(std::path::Path::new(DEFAULT_TABLE_PATH)).unwrap();
+    let table = SignatureTable::load(&default_table_path()).unwrap();
     let gears = gearwear_core::closed_loop::effects::reference_gears(table.gearbox());
     let pinion = &gears[0];
     let r = run(
@@ -451,7 +451,7 @@ fn mains_hum_is_unexplained_and_called_electrical_pickup() {
 #[test]
 fn a_feature_shift_moves_the_table_posterior_the_right_way() {
     use gearwear_core::diagnosis::{DiagnoseOptions, Matcher, diagnose, diagnose_shifted};
-    let table = SignatureTable::load(std::path::Path::new(DEFAULT_TABLE_PATH)).unwrap();
+    let table = SignatureTable::load(&default_table_path()).unwrap();
     let rec = rig_record(&table, RigEffects::default(), 2010, 1.0, 30.0);
     let opts = DiagnoseOptions::default();
     let plain = diagnose(&rec, &table, &opts).unwrap();
@@ -550,7 +550,7 @@ fn speed_wander_is_not_claimed_as_the_input_shafts_modulation() {
 /// over a grid rather than read off lines the grid cannot separate.
 #[test]
 fn a_slow_shafts_modulation_is_named_at_its_shaft() {
-    let table = SignatureTable::load(std::path::Path::new(DEFAULT_TABLE_PATH)).unwrap();
+    let table = SignatureTable::load(&default_table_path()).unwrap();
     let gears = gearwear_core::closed_loop::effects::reference_gears(table.gearbox());
     let gear = &gears[1];
     assert!((gear.shaft_ratio - 0.01).abs() < 1e-9);
@@ -580,7 +580,7 @@ fn a_slow_shafts_modulation_is_named_at_its_shaft() {
 /// of seed 7; before, only the modulation was named and the error went 5.7 → 3.2 dB).
 #[test]
 fn a_pairs_resonance_is_searched_beside_its_element() {
-    let table = SignatureTable::load(std::path::Path::new(DEFAULT_TABLE_PATH)).unwrap();
+    let table = SignatureTable::load(&default_table_path()).unwrap();
     let spec = RigSpec {
         ea: 0.9766941446745643,
         omega1: 1.5764878589060372,
