@@ -1,7 +1,8 @@
 //! Accuracy of the wear estimator on held-out simulated records (not a timing benchmark).
 //!
 //! `cargo bench --bench accuracy` (env: `ACC_N` records, default 200; `ACC_SEED` base seed,
-//! default 0xE7A1; `ACC_TABLE` table path, default the committed one; `ACC_OUT` JSON output).
+//! default 0xE7A1; `ACC_TABLE` table path, default the committed one; `ACC_OUT` JSON rows, default
+//! `target/bench/accuracy-rows.json`, under `CARGO_TARGET_DIR` when set).
 //! The gearbox is the table's own (its header carries the description): for another gearbox,
 //! `gearwear precompute --gearbox G.toml --output T.json` then `ACC_TABLE=T.json`.
 //! Records: ea ~ U[0.1, 1], Ω1 from a few speeds inside the table band (the paper rig's 0.62,
@@ -13,10 +14,14 @@
 use std::time::Instant;
 
 use gearwear::diagnosis::{DiagnoseOptions, Matcher, diagnose_with};
+use gearwear::gearbox::Gearbox;
 use gearwear::model::Wear;
 use gearwear::signature::precompute::{MeasurementSpec, simulate_measurement_with};
 use gearwear::signature::{SensorQuantity, SignatureTable, SplitMix64, mix_seed};
 use rayon::prelude::*;
+
+#[path = "common/out.rs"]
+mod out;
 
 fn env<T: std::str::FromStr>(k: &str, d: T) -> T {
     std::env::var(k)
@@ -41,49 +46,101 @@ struct Row {
     error: Option<String>,
 }
 
+/// The bench's setup: the table, its gearbox, the options and the operating points.
+struct Bench {
+    table: SignatureTable,
+    table_path: String,
+    cfg: Gearbox,
+    opts: DiagnoseOptions,
+    /// Ω1 of the held-out records, cycled through.
+    speeds: Vec<f64>,
+    /// Number of held-out records and their base seed.
+    n: usize,
+    base: u64,
+}
+
+/// Sample rate of every record (Hz).
+const FS: f64 = 25_600.0;
+
+impl Bench {
+    fn from_env() -> Self {
+        // `cargo bench` passes `--bench`; ignore arguments.
+        let n: usize = env("ACC_N", 200);
+        let base: u64 = env("ACC_SEED", 0xE7A1);
+        let table_path: String = env(
+            "ACC_TABLE",
+            concat!(env!("CARGO_MANIFEST_DIR"), "/signatures/model_a_accel.json").to_string(),
+        );
+        let table = SignatureTable::load(std::path::Path::new(&table_path)).expect("table loads");
+        let cfg = table.gearbox().clone();
+        if let Err(e) = table.check_model(&cfg) {
+            eprintln!("warning: {e}");
+        }
+        println!(
+            "gearbox {} (table {table_path}), Ω1 band {:?}",
+            cfg.name(),
+            table.omega_band()
+        );
+        let mut opts = DiagnoseOptions::default();
+        if let Ok(v) = std::env::var("ACC_TEMP") {
+            opts.temperature = v.parse().unwrap();
+        }
+        if let Ok(v) = std::env::var("ACC_SIGMA") {
+            opts.feature_sigma = v.parse().unwrap();
+        }
+        if let Ok(v) = std::env::var("ACC_FLOOR") {
+            opts.floor_db = v.parse().unwrap();
+        }
+        let speeds: Vec<f64> = if cfg.hash == gearwear::gearbox::Gearbox::paper_rig().hash {
+            vec![0.62, 0.87, 1.0, 1.13, 1.38]
+        } else {
+            let (lo, hi) = table.omega_band();
+            [0.1, 0.3, 0.5, 0.7, 0.9]
+                .iter()
+                .map(|u| lo + u * (hi - lo))
+                .collect()
+        };
+        Bench {
+            table,
+            table_path,
+            cfg,
+            opts,
+            speeds,
+            n,
+            base,
+        }
+    }
+
+    /// Input-shaft rate (Hz) at an operating point.
+    fn shaft_at(&self, om: f64) -> f64 {
+        om * self.cfg.reference_frequency_hz() / self.cfg.f1_hz(1.0)
+    }
+}
+
 fn main() {
-    // `cargo bench` passes `--bench`; ignore arguments.
-    let n: usize = env("ACC_N", 200);
-    let base: u64 = env("ACC_SEED", 0xE7A1);
-    let table_path: String = env(
-        "ACC_TABLE",
-        concat!(env!("CARGO_MANIFEST_DIR"), "/signatures/model_a_accel.json").to_string(),
-    );
-    let table = SignatureTable::load(std::path::Path::new(&table_path)).expect("table loads");
-    let cfg = table.gearbox().clone();
-    if let Err(e) = table.check_model(&cfg) {
-        eprintln!("warning: {e}");
-    }
-    let f_ref = cfg.reference_frequency_hz();
-    // Input-shaft rate (Hz) at an operating point.
-    let shaft_at = |om: f64| om * f_ref / cfg.f1_hz(1.0);
+    let b = Bench::from_env();
+    let t0 = Instant::now();
+    let rows = held_out_rows(&b);
+    let wall = t0.elapsed().as_secs_f64();
+    print_summary(&b, &rows);
+    print_checks(&b, &rows);
     println!(
-        "gearbox {} (table {table_path}), Ω1 band {:?}",
-        cfg.name(),
-        table.omega_band()
+        "simulation + diagnosis wall time: {wall:.1} s on {} threads",
+        rayon::current_num_threads()
     );
-    let mut opts = DiagnoseOptions::default();
-    if let Ok(v) = std::env::var("ACC_TEMP") {
-        opts.temperature = v.parse().unwrap();
-    }
-    if let Ok(v) = std::env::var("ACC_SIGMA") {
-        opts.feature_sigma = v.parse().unwrap();
-    }
-    if let Ok(v) = std::env::var("ACC_FLOOR") {
-        opts.floor_db = v.parse().unwrap();
-    }
-    let speeds: Vec<f64> = if cfg.hash == gearwear::gearbox::Gearbox::paper_rig().hash {
-        vec![0.62, 0.87, 1.0, 1.13, 1.38]
-    } else {
-        let (lo, hi) = table.omega_band();
-        [0.1, 0.3, 0.5, 0.7, 0.9]
-            .iter()
-            .map(|u| lo + u * (hi - lo))
-            .collect()
-    };
-    let fs = 25_600.0;
+    planetary_sensitivity(&b);
+    time_diagnose(&b);
+    let p = out::out_path("ACC_OUT", "accuracy-rows.json");
+    std::fs::write(&p, serde_json::to_string_pretty(&rows).unwrap()).unwrap();
+    println!("rows written to {}", p.display());
+}
+
+/// Simulate and diagnose the held-out records: ea ~ U[0.1, 1], Ω1 cycling through the speeds,
+/// log-uniform gain, every second record with the shaft rate given.
+fn held_out_rows(b: &Bench) -> Vec<Row> {
+    let (cfg, speeds, base) = (&b.cfg, &b.speeds, b.base);
     let mut rng = SplitMix64::new(base);
-    let cases: Vec<(f64, f64, f64, u64)> = (0..n)
+    let cases: Vec<(f64, f64, f64, u64)> = (0..b.n)
         .map(|k| {
             let ea = rng.range(0.1, 1.0);
             let om = speeds[k % speeds.len()];
@@ -91,8 +148,7 @@ fn main() {
             (ea, om, gain, mix_seed(&[base, 0xACC, k as u64]))
         })
         .collect();
-    let t0 = Instant::now();
-    let rows: Vec<Row> = cases
+    cases
         .par_iter()
         .enumerate()
         .map(|(k, &(ea, om, gain, seed))| {
@@ -104,7 +160,7 @@ fn main() {
             let spec = MeasurementSpec {
                 ea,
                 omega1: om,
-                sample_rate: fs,
+                sample_rate: FS,
                 duration: 1.0,
                 gain,
                 snr_db: Some(20.0),
@@ -114,44 +170,66 @@ fn main() {
             };
             let rec = simulate_measurement_with(&model, &spec).expect("simulation");
             let known = k % 2 == 0;
-            let matcher = Matcher::new(&table, &opts).unwrap();
+            let matcher = Matcher::new(&b.table, &b.opts).unwrap();
             let o = DiagnoseOptions {
-                shaft_hz: known.then(|| shaft_at(om)),
-                ..opts.clone()
+                shaft_hz: known.then(|| b.shaft_at(om)),
+                ..b.opts.clone()
             };
-            match diagnose_with(&rec, &table, &matcher, &o) {
-                Ok(d) => Row {
-                    ea,
-                    omega1: om,
-                    known_speed: known,
-                    estimate: d.wear_degree.estimate,
-                    lower: d.wear_degree.lower,
-                    upper: d.wear_degree.upper,
-                    baseline: d.baseline_single_ratio.map_or(f64::NAN, |b| b.ea),
-                    f1_error_rel: d.f1_hz / (om * f_ref) - 1.0,
-                    planetary_flag: d.planetary_clearance_elevated,
-                    motion: d.motion_state,
-                    chi2_per_feature: d.fit.chi2_per_feature,
-                    error: None,
-                },
-                Err(e) => Row {
-                    ea,
-                    omega1: om,
-                    known_speed: known,
-                    estimate: f64::NAN,
-                    lower: f64::NAN,
-                    upper: f64::NAN,
-                    baseline: f64::NAN,
-                    f1_error_rel: f64::NAN,
-                    planetary_flag: false,
-                    motion: String::new(),
-                    chi2_per_feature: f64::NAN,
-                    error: Some(e.to_string()),
-                },
-            }
+            row(
+                &b.cfg,
+                ea,
+                om,
+                known,
+                diagnose_with(&rec, &b.table, &matcher, &o),
+            )
         })
-        .collect();
-    let wall = t0.elapsed().as_secs_f64();
+        .collect()
+}
+
+/// One held-out record's row from its diagnosis (or its error).
+fn row(
+    cfg: &Gearbox,
+    ea: f64,
+    om: f64,
+    known: bool,
+    d: gearwear::Result<gearwear::diagnosis::Diagnosis>,
+) -> Row {
+    let f_ref = cfg.reference_frequency_hz();
+    match d {
+        Ok(d) => Row {
+            ea,
+            omega1: om,
+            known_speed: known,
+            estimate: d.wear_degree.estimate,
+            lower: d.wear_degree.lower,
+            upper: d.wear_degree.upper,
+            baseline: d.baseline_single_ratio.map_or(f64::NAN, |b| b.ea),
+            f1_error_rel: d.f1_hz / (om * f_ref) - 1.0,
+            planetary_flag: d.planetary_clearance_elevated,
+            motion: d.motion_state,
+            chi2_per_feature: d.fit.chi2_per_feature,
+            error: None,
+        },
+        Err(e) => Row {
+            ea,
+            omega1: om,
+            known_speed: known,
+            estimate: f64::NAN,
+            lower: f64::NAN,
+            upper: f64::NAN,
+            baseline: f64::NAN,
+            f1_error_rel: f64::NAN,
+            planetary_flag: false,
+            motion: String::new(),
+            chi2_per_feature: f64::NAN,
+            error: Some(e.to_string()),
+        },
+    }
+}
+
+/// The accuracy table: MAE, coverage, interval width and the baseline, over all records and
+/// per subset (speed given or not, per Ω1, per ea range).
+fn print_summary(b: &Bench, rows: &[Row]) {
     let summarise = |label: &str, sel: &dyn Fn(&Row) -> bool| {
         let r: Vec<&Row> = rows
             .iter()
@@ -177,6 +255,7 @@ fn main() {
             100.0 * cov
         );
     };
+    let (n, base, table_path, opts) = (b.n, b.base, &b.table_path, &b.opts);
     println!("\nheld-out records: {n}, base seed {base:#x}, table {table_path}, options {opts:?}");
     println!(
         "| subset | records | MAE ea | 90 % coverage | mean interval width | baseline MAE (f1:f2) | errors |"
@@ -185,7 +264,7 @@ fn main() {
     summarise("all", &|_| true);
     summarise("speed given", &|r| r.known_speed);
     summarise("tacho-less", &|r| !r.known_speed);
-    for &s in &speeds {
+    for &s in &b.speeds {
         summarise(&format!("Ω1 = {s}"), &|r| (r.omega1 - s).abs() < 1e-9);
     }
     for (lo, hi) in [(0.1, 0.3), (0.3, 0.5), (0.5, 0.7), (0.7, 0.85), (0.85, 1.0)] {
@@ -193,6 +272,11 @@ fn main() {
             r.ea >= lo && r.ea < hi
         });
     }
+}
+
+/// False planetary flags, f1 errors, the χ² quantiles and the first errors.
+fn print_checks(b: &Bench, rows: &[Row]) {
+    let n = b.n;
     let flags = rows.iter().filter(|r| r.planetary_flag).count();
     let bad_f1 = rows
         .iter()
@@ -226,13 +310,12 @@ fn main() {
             r.error.as_ref().unwrap()
         );
     }
-    println!(
-        "simulation + diagnosis wall time: {wall:.1} s on {} threads",
-        rayon::current_num_threads()
-    );
+}
 
-    // Planetary flag sensitivity: records with an elevated planetary error (only for a
-    // gearbox with a planetary stage the wear does not act on).
+/// Planetary flag sensitivity: records with an elevated planetary error (only for a gearbox
+/// with a planetary stage the wear does not act on).
+fn planetary_sensitivity(b: &Bench) {
+    let (cfg, speeds, base) = (&b.cfg, &b.speeds, b.base);
     let n_planet: usize = if cfg.planetary_ratio().is_some() {
         env("ACC_PLANET_N", 40)
     } else {
@@ -246,11 +329,11 @@ fn main() {
                 let ea = r.range(0.1, 1.0);
                 let om = speeds[k % speeds.len()];
                 let rec = gearwear::signature::precompute::simulate_measurement(
-                    &cfg,
+                    cfg,
                     &MeasurementSpec {
                         ea,
                         omega1: om,
-                        sample_rate: fs,
+                        sample_rate: FS,
                         duration: 1.0,
                         gain: 1.0,
                         snr_db: Some(20.0),
@@ -261,10 +344,10 @@ fn main() {
                 )
                 .expect("simulation");
                 let o = DiagnoseOptions {
-                    shaft_hz: Some(shaft_at(om)),
-                    ..opts.clone()
+                    shaft_hz: Some(b.shaft_at(om)),
+                    ..b.opts.clone()
                 };
-                match gearwear::diagnosis::diagnose(&rec, &table, &o) {
+                match gearwear::diagnosis::diagnose(&rec, &b.table, &o) {
                     Ok(d) => (
                         d.planetary_clearance_elevated,
                         (d.wear_degree.estimate - ea).abs(),
@@ -279,10 +362,13 @@ fn main() {
             "planetary error {pe}: flag raised on {hits}/{n_planet} records (speed given); ea MAE on them {mae:.3}"
         );
     }
+}
 
-    // Time of one diagnose, 1 s at 25.6 kHz, mid-band Ω1, tacho-less and with the speed.
-    let om_mid = speeds[speeds.len() / 2];
-    let model = cfg
+/// Time of one diagnose, 1 s at 25.6 kHz, mid-band Ω1, tacho-less and with the speed.
+fn time_diagnose(b: &Bench) {
+    let om_mid = b.speeds[b.speeds.len() / 2];
+    let model = b
+        .cfg
         .assembly(Wear::fixed_axis(0.8))
         .unwrap()
         .resolve()
@@ -292,7 +378,7 @@ fn main() {
         &MeasurementSpec {
             ea: 0.8,
             omega1: om_mid,
-            sample_rate: fs,
+            sample_rate: FS,
             duration: 1.0,
             gain: 1.0,
             snr_db: Some(20.0),
@@ -304,16 +390,16 @@ fn main() {
     .unwrap();
     for (label, shaft) in [
         ("tacho-less", None),
-        ("speed given", Some(shaft_at(om_mid))),
+        ("speed given", Some(b.shaft_at(om_mid))),
     ] {
         let o = DiagnoseOptions {
             shaft_hz: shaft,
-            ..opts.clone()
+            ..b.opts.clone()
         };
         let mut times = Vec::new();
         for _ in 0..21 {
             let t = Instant::now();
-            let d = gearwear::diagnosis::diagnose(&rec, &table, &o).unwrap();
+            let d = gearwear::diagnosis::diagnose(&rec, &b.table, &o).unwrap();
             times.push(t.elapsed().as_secs_f64());
             std::hint::black_box(d);
         }
@@ -322,9 +408,5 @@ fn main() {
             "diagnose, 1 s at 25.6 kHz, {label} (incl. table statistics): median {:.1} ms over 21 runs",
             1e3 * times[10]
         );
-    }
-    if let Ok(p) = std::env::var("ACC_OUT") {
-        std::fs::write(&p, serde_json::to_string_pretty(&rows).unwrap()).unwrap();
-        println!("rows written to {p}");
     }
 }

@@ -3,7 +3,8 @@
 //!
 //! `cargo bench --bench diagnose` (plain program, `harness = false`). Env:
 //! `DIAG_REPS` calls per case (default 101; the median and p99 are reported);
-//! `DIAG_DUMP` path: also write the JSON diagnoses of `DIAG_DUMP_N` (default 20) held-out
+//! `DIAG_DUMP` path (default `target/bench/diagnose-dump.json`, under `CARGO_TARGET_DIR` when
+//! set): where to write the JSON diagnoses of `DIAG_DUMP_N` (default 20) held-out
 //! records (the accuracy benchmark's generator: ea ~ U[0.1, 1], Ω1 cycling through five speeds,
 //! random gain, 20 dB SNR, 25.6 kHz, 1 s; every second record with the shaft rate given);
 //! `DIAG_TABLE` table path (default the committed one).
@@ -15,6 +16,8 @@ use std::time::Instant;
 
 #[path = "common/four_sines.rs"]
 mod four_sines;
+#[path = "common/out.rs"]
+mod out;
 
 use gearwear::diagnosis::{DiagnoseOptions, Matcher, diagnose_with};
 use gearwear::gearbox::Gearbox;
@@ -69,32 +72,7 @@ fn main() {
         1e3 * t.elapsed().as_secs_f64()
     );
 
-    if let Ok(path) = std::env::var("DIAG_DUMP") {
-        let n: usize = env("DIAG_DUMP_N", 20);
-        let base: u64 = 0xD1A6;
-        let speeds = [0.62, 0.87, 1.0, 1.13, 1.38];
-        let mut rng = SplitMix64::new(base);
-        let mut out = Vec::new();
-        for k in 0..n {
-            let ea = rng.range(0.1, 1.0);
-            let om = speeds[k % speeds.len()];
-            let gain = 10f64.powf(rng.range(-2.0, 2.0));
-            let rec = record(&cfg, ea, om, gain, mix_seed(&[base, 0xACC, k as u64]));
-            let known = k % 2 == 0;
-            let o = DiagnoseOptions {
-                shaft_hz: known.then(|| om * cfg.reference_frequency_hz() / cfg.f1_hz(1.0)),
-                ..opts.clone()
-            };
-            let d = diagnose_with(&rec, &table, &matcher, &o)
-                .map(|d| serde_json::to_value(d).unwrap())
-                .unwrap_or_else(|e| serde_json::json!({ "error": e.to_string() }));
-            out.push(
-                serde_json::json!({ "ea": ea, "omega1": om, "known_speed": known, "diagnosis": d }),
-            );
-        }
-        std::fs::write(&path, serde_json::to_string_pretty(&out).unwrap()).unwrap();
-        println!("{n} diagnoses written to {path}");
-    }
+    dump_diagnoses(&cfg, &table, &matcher, &opts);
 
     let rec = record(&cfg, 0.8, 1.0, 1.0, 1);
     // The load generator's record: a poor fit, the service's worst case.
@@ -141,4 +119,39 @@ fn main() {
             q(1.0)
         );
     }
+}
+
+/// Write the JSON diagnoses of `DIAG_DUMP_N` held-out records to `DIAG_DUMP` (default
+/// `target/bench/diagnose-dump.json`), for before/after regression checks.
+fn dump_diagnoses(
+    cfg: &Gearbox,
+    table: &SignatureTable,
+    matcher: &Matcher,
+    opts: &DiagnoseOptions,
+) {
+    let path = out::out_path("DIAG_DUMP", "diagnose-dump.json");
+    let n: usize = env("DIAG_DUMP_N", 20);
+    let base: u64 = 0xD1A6;
+    let speeds = [0.62, 0.87, 1.0, 1.13, 1.38];
+    let mut rng = SplitMix64::new(base);
+    let mut out = Vec::new();
+    for k in 0..n {
+        let ea = rng.range(0.1, 1.0);
+        let om = speeds[k % speeds.len()];
+        let gain = 10f64.powf(rng.range(-2.0, 2.0));
+        let rec = record(cfg, ea, om, gain, mix_seed(&[base, 0xACC, k as u64]));
+        let known = k % 2 == 0;
+        let o = DiagnoseOptions {
+            shaft_hz: known.then(|| om * cfg.reference_frequency_hz() / cfg.f1_hz(1.0)),
+            ..opts.clone()
+        };
+        let d = diagnose_with(&rec, table, matcher, &o)
+            .map(|d| serde_json::to_value(d).unwrap())
+            .unwrap_or_else(|e| serde_json::json!({ "error": e.to_string() }));
+        out.push(
+            serde_json::json!({ "ea": ea, "omega1": om, "known_speed": known, "diagnosis": d }),
+        );
+    }
+    std::fs::write(&path, serde_json::to_string_pretty(&out).unwrap()).unwrap();
+    println!("{n} diagnoses written to {}", path.display());
 }

@@ -102,6 +102,105 @@ struct Case {
     duration_s: f64,
 }
 
+/// The sampling and restart schedule of one diffsol run (see [`drive!`]).
+struct Drive<'a> {
+    sampler: Sampler<'a>,
+    y0: &'a [f64],
+    /// The system's breakpoints after t = 0: the stop times when `stops`.
+    breaks: &'a [f64],
+    /// Load steps: the right-hand side jumps there, so the solver is restarted (as after a root).
+    load_steps: &'a [f64],
+    stops: bool,
+    /// Lift diffsol's cap on Newton convergence failures over the whole run.
+    lift_newton_cap: bool,
+    /// Sample step and end time (dimensionless).
+    dt: f64,
+    t_end: f64,
+    /// Restarts so far (roots and load steps).
+    restarts: usize,
+}
+
+/// Run one diffsol method (`bdf`, `tr_bdf2`, `esdirk34`) on `$problem` through the schedule
+/// `$drive` ([`Drive`]): sample on the grid, restart at switches (roots) and load steps, stop
+/// at the breakpoints when `stops`. A macro, not a function: the three solvers share no trait
+/// that exposes their configuration. Evaluates to (steps, rejected steps, LU setups, Newton
+/// failures); `?` returns from the caller.
+macro_rules! drive {
+    ($method:ident, $problem:expr, $drive:expr) => {{
+        let d: &mut Drive = $drive;
+        let (breaks, load_steps, stops, dt, t_end) =
+            (d.breaks, d.load_steps, d.stops, d.dt, d.t_end);
+        let problem = $problem;
+        let mut s = problem.$method::<LS>().map_err(|e| format!("{e}"))?;
+        if d.lift_newton_cap {
+            // diffsol stops after 50 Newton convergence failures summed over the whole run
+            // (not per step); a long run through many stiffness edges reaches that.
+            s.config_mut().maximum_newton_fails = usize::MAX;
+        }
+        let slack = 1e-9 * dt;
+        let mut k = 0usize;
+        d.sampler.push(0.0, d.y0);
+        k += 1;
+        let mut bi = 0usize;
+        let next_stop = |bi: usize| -> f64 {
+            if stops && bi < breaks.len() {
+                breaks[bi]
+            } else {
+                t_end
+            }
+        };
+        s.set_stop_time(next_stop(bi)).map_err(|e| format!("{e}"))?;
+        let mut last_root = f64::NEG_INFINITY;
+        loop {
+            let reason = s.step().map_err(|e| format!("{e}"))?;
+            let t_now = match reason {
+                OdeSolverStopReason::RootFound(tr, _) => tr,
+                _ => s.state().t,
+            };
+            while (k as f64) * dt <= t_now.min(t_end) + slack {
+                let tk = ((k as f64) * dt).min(t_now);
+                let y = s.interpolate(tk).map_err(|e| format!("{e}"))?;
+                d.sampler.push(tk, y.inner().as_slice());
+                k += 1;
+            }
+            match reason {
+                OdeSolverStopReason::RootFound(tr, _) => {
+                    // Restart at the switch unless it is the one just restarted from.
+                    if tr > last_root + 1e-9 * dt.max(tr.abs() * 1e-6) {
+                        s.state_mut_back(tr).map_err(|e| format!("{e}"))?;
+                        last_root = tr;
+                        d.restarts += 1;
+                    }
+                }
+                OdeSolverStopReason::TstopReached => {
+                    if s.state().t >= t_end - slack {
+                        break;
+                    }
+                    let t = s.state().t;
+                    if load_steps.iter().any(|&b| (b - t).abs() <= slack) {
+                        // Touching the state marks it modified: the next step restarts.
+                        let _ = s.state_mut();
+                        d.restarts += 1;
+                    }
+                    bi += 1;
+                    while stops && bi < breaks.len() && breaks[bi] <= s.state().t + slack {
+                        bi += 1;
+                    }
+                    s.set_stop_time(next_stop(bi)).map_err(|e| format!("{e}"))?;
+                }
+                OdeSolverStopReason::InternalTimestep => {}
+            }
+        }
+        let st = s.get_statistics().clone();
+        (
+            st.number_of_steps,
+            st.number_of_error_test_failures,
+            st.number_of_linear_solver_setups,
+            st.number_of_nonlinear_solver_fails,
+        )
+    }};
+}
+
 #[allow(clippy::too_many_arguments)]
 fn run_diffsol(
     case: &Case,
@@ -168,81 +267,18 @@ fn run_diffsol(
             move |_p: &[f64], _t: f64, y: &mut [f64]| y.copy_from_slice(&y0c),
             dim,
         );
-    let mut sampler = Sampler::new(p);
     let breaks: Vec<f64> = sys.breakpoints().into_iter().filter(|&b| b > 0.0).collect();
-    let mut restarts = 0usize;
-    macro_rules! drive {
-        ($method:ident, $problem:expr) => {{
-            let problem = $problem;
-            let mut s = problem.$method::<LS>().map_err(|e| format!("{e}"))?;
-            if lift_newton_cap {
-                // diffsol stops after 50 Newton convergence failures summed over the whole run
-                // (not per step); a long run through many stiffness edges reaches that.
-                s.config_mut().maximum_newton_fails = usize::MAX;
-            }
-            let slack = 1e-9 * dt;
-            let mut k = 0usize;
-            sampler.push(0.0, &y0);
-            k += 1;
-            let mut bi = 0usize;
-            let next_stop = |bi: usize| -> f64 {
-                if stops && bi < breaks.len() {
-                    breaks[bi]
-                } else {
-                    t_end
-                }
-            };
-            s.set_stop_time(next_stop(bi)).map_err(|e| format!("{e}"))?;
-            let mut last_root = f64::NEG_INFINITY;
-            loop {
-                let reason = s.step().map_err(|e| format!("{e}"))?;
-                let t_now = match reason {
-                    OdeSolverStopReason::RootFound(tr, _) => tr,
-                    _ => s.state().t,
-                };
-                while (k as f64) * dt <= t_now.min(t_end) + slack {
-                    let tk = ((k as f64) * dt).min(t_now);
-                    let y = s.interpolate(tk).map_err(|e| format!("{e}"))?;
-                    sampler.push(tk, y.inner().as_slice());
-                    k += 1;
-                }
-                match reason {
-                    OdeSolverStopReason::RootFound(tr, _) => {
-                        // Restart at the switch unless it is the one just restarted from.
-                        if tr > last_root + 1e-9 * dt.max(tr.abs() * 1e-6) {
-                            s.state_mut_back(tr).map_err(|e| format!("{e}"))?;
-                            last_root = tr;
-                            restarts += 1;
-                        }
-                    }
-                    OdeSolverStopReason::TstopReached => {
-                        if s.state().t >= t_end - slack {
-                            break;
-                        }
-                        let t = s.state().t;
-                        if load_steps.iter().any(|&b| (b - t).abs() <= slack) {
-                            // Touching the state marks it modified: the next step restarts.
-                            let _ = s.state_mut();
-                            restarts += 1;
-                        }
-                        bi += 1;
-                        while stops && bi < breaks.len() && breaks[bi] <= s.state().t + slack {
-                            bi += 1;
-                        }
-                        s.set_stop_time(next_stop(bi)).map_err(|e| format!("{e}"))?;
-                    }
-                    OdeSolverStopReason::InternalTimestep => {}
-                }
-            }
-            let st = s.get_statistics().clone();
-            (
-                st.number_of_steps,
-                st.number_of_error_test_failures,
-                st.number_of_linear_solver_setups,
-                st.number_of_nonlinear_solver_fails,
-            )
-        }};
-    }
+    let mut d = Drive {
+        sampler: Sampler::new(p),
+        y0: &y0,
+        breaks: &breaks,
+        load_steps: &load_steps,
+        stops,
+        lift_newton_cap,
+        dt,
+        t_end,
+        restarts: 0,
+    };
     let (steps, rejected, lu, newton_fails) = if stops && n_sw > 0 {
         let problem = builder
             .root(
@@ -252,26 +288,26 @@ fn run_diffsol(
             .build()
             .map_err(|e| format!("{e}"))?;
         match method {
-            Method::Bdf => drive!(bdf, problem),
-            Method::TrBdf2 => drive!(tr_bdf2, problem),
-            Method::Esdirk34 => drive!(esdirk34, problem),
+            Method::Bdf => drive!(bdf, problem, &mut d),
+            Method::TrBdf2 => drive!(tr_bdf2, problem, &mut d),
+            Method::Esdirk34 => drive!(esdirk34, problem, &mut d),
         }
     } else {
         let problem = builder.build().map_err(|e| format!("{e}"))?;
         match method {
-            Method::Bdf => drive!(bdf, problem),
-            Method::TrBdf2 => drive!(tr_bdf2, problem),
-            Method::Esdirk34 => drive!(esdirk34, problem),
+            Method::Bdf => drive!(bdf, problem, &mut d),
+            Method::TrBdf2 => drive!(tr_bdf2, problem, &mut d),
+            Method::Esdirk34 => drive!(esdirk34, problem, &mut d),
         }
     };
     let wall_s = start.elapsed().as_secs_f64();
     Ok(Run {
-        acc: sampler.acc,
+        acc: d.sampler.acc,
         steps,
         rejected,
         rhs_evals: evals.get(),
         lu,
-        restarts,
+        restarts: d.restarts,
         newton_fails,
         wall_s,
     })

@@ -79,36 +79,59 @@ struct Window {
     errors: usize,
 }
 
-#[tokio::main(flavor = "multi_thread", worker_threads = 2)]
-async fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    let url = arg(&args, "--url", "http://127.0.0.1:8080");
-    let key = arg(&args, "--key", "");
-    let conc: usize = arg(&args, "--concurrency", "4").parse().unwrap();
-    let secs: f64 = arg(&args, "--seconds", "10").parse().unwrap();
-    let rate: f64 = arg(&args, "--rate", "0").parse().unwrap();
-    let every: f64 = arg(&args, "--report-every", "0").parse().unwrap();
-    let machines: usize = arg(&args, "--machines", "4").parse().unwrap();
-    let format = arg(&args, "--format", "json");
-    let pid = arg(&args, "--pid", "");
-    let record = arg(&args, "--record", "");
-    // `--requests N`: stop after N requests (0: no limit; `--seconds` still bounds the run).
-    let requests: usize = arg(&args, "--requests", "0").parse().unwrap();
-    // The default record: four sines and a little noise (a poor fit to the model, so the
-    // diagnosis tries every f1 candidate — the slow path); `--record FILE` sends any record
-    // file `gearwear diagnose` reads (e.g. one written by `gearwear synth`), resampled to
-    // nothing: its own samples and rate.
+/// The command line (see the module documentation).
+struct Options {
+    url: String,
+    key: String,
+    conc: usize,
+    secs: f64,
+    rate: f64,
+    every: f64,
+    machines: usize,
+    format: String,
+    pid: String,
+    record: String,
+    /// `--requests N`: stop after N requests (0: no limit; `--seconds` still bounds the run).
+    requests: usize,
+}
+
+impl Options {
+    fn parse(args: &[String]) -> Self {
+        Options {
+            url: arg(args, "--url", "http://127.0.0.1:8080"),
+            key: arg(args, "--key", ""),
+            conc: arg(args, "--concurrency", "4").parse().unwrap(),
+            secs: arg(args, "--seconds", "10").parse().unwrap(),
+            rate: arg(args, "--rate", "0").parse().unwrap(),
+            every: arg(args, "--report-every", "0").parse().unwrap(),
+            machines: arg(args, "--machines", "4").parse().unwrap(),
+            format: arg(args, "--format", "json"),
+            pid: arg(args, "--pid", ""),
+            record: arg(args, "--record", ""),
+            requests: arg(args, "--requests", "0").parse().unwrap(),
+        }
+    }
+}
+
+/// The request body, its content type and the query string.
+///
+/// The default record: four sines and a little noise (a poor fit to the model, so the
+/// diagnosis tries every f1 candidate — the slow path); `--record FILE` sends any record
+/// file `gearwear diagnose` reads (e.g. one written by `gearwear synth`), resampled to
+/// nothing: its own samples and rate.
+fn request_body(o: &Options) -> (Vec<u8>, &'static str, String) {
+    let record = &o.record;
     let (x, fs) = if record.is_empty() {
         (four_sines::samples(), four_sines::SAMPLE_RATE_HZ)
     } else {
         let r = gearwear::record::read_record(
-            std::path::Path::new(&record),
+            std::path::Path::new(record),
             &gearwear::record::ReadOptions::default(),
         )
         .unwrap_or_else(|e| panic!("--record {record}: {e}"));
         (r.samples, r.sample_rate)
     };
-    let (body, ct, q) = if format == "f32" {
+    if o.format == "f32" {
         let b: Vec<u8> = x.iter().flat_map(|v| (*v as f32).to_le_bytes()).collect();
         (
             b,
@@ -119,7 +142,114 @@ async fn main() {
         let b =
             serde_json::to_vec(&serde_json::json!({"sample_rate_hz": fs, "samples": x})).unwrap();
         (b, "application/json", String::new())
-    };
+    }
+}
+
+/// Every `every` seconds (none when `every ≤ 0`): the last window's throughput, latencies and
+/// the server's RSS.
+fn spawn_reporter(
+    window: Arc<Mutex<Window>>,
+    pid: String,
+    every: f64,
+    start: Instant,
+) -> tokio::task::JoinHandle<()> {
+    tokio::spawn(async move {
+        if every <= 0.0 {
+            return;
+        }
+        let mut t = tokio::time::interval_at(
+            tokio::time::Instant::now() + Duration::from_secs_f64(every),
+            Duration::from_secs_f64(every),
+        );
+        loop {
+            t.tick().await;
+            let w = std::mem::take(&mut *window.lock().unwrap());
+            let mut l = w.lat;
+            l.sort_by(|a, b| a.partial_cmp(b).unwrap());
+            let (rss, _) = rss_kb(&pid).unwrap_or((0, 0));
+            println!(
+                "t={:>6.0}s  {:>6} ok  {:>3} errors  {:>7.1} rec/s  p50 {:>6.2} ms  p99 {:>6.2} ms  server RSS {:.1} MB",
+                start.elapsed().as_secs_f64(),
+                l.len(),
+                w.errors,
+                l.len() as f64 / every,
+                percentile(&l, 0.5),
+                percentile(&l, 0.99),
+                rss as f64 / 1024.0
+            );
+        }
+    })
+}
+
+/// One request: what it posts, where, and the windows its latency (or error) goes to.
+struct Request {
+    client: reqwest::Client,
+    url: String,
+    key: String,
+    q: String,
+    ct: &'static str,
+    body: axum::body::Bytes,
+    /// Machine index and request number.
+    m: usize,
+    i: usize,
+    windows: [Arc<Mutex<Window>>; 2],
+}
+
+impl Request {
+    /// Post the record; add the latency of a `201` (body read) to both windows, else an error.
+    async fn send(self) {
+        let Request {
+            client,
+            url,
+            key,
+            q,
+            ct,
+            body,
+            m,
+            i,
+            windows,
+        } = self;
+        let t = Instant::now();
+        let r = client
+            .post(format!("{url}/v1/machines/load-{m}/records{q}"))
+            .bearer_auth(&key)
+            .header("content-type", ct)
+            .header(
+                "idempotency-key",
+                format!("load-{i}-{}", std::process::id()),
+            )
+            .body(body)
+            .send()
+            .await;
+        let ok = match r {
+            Ok(r) if r.status() == 201 => r.bytes().await.is_ok(),
+            Ok(r) => {
+                eprintln!("{}: {}", r.status(), r.text().await.unwrap_or_default());
+                false
+            }
+            Err(e) => {
+                eprintln!("{e}");
+                false
+            }
+        };
+        let dt = t.elapsed().as_secs_f64();
+        for w in &windows {
+            let mut w = w.lock().unwrap();
+            if ok {
+                w.lat.push(dt);
+            } else {
+                w.errors += 1;
+            }
+        }
+    }
+}
+
+#[tokio::main(flavor = "multi_thread", worker_threads = 2)]
+async fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let o = Options::parse(&args);
+    let (conc, rate) = (o.conc, o.rate);
+    let (body, ct, q) = request_body(&o);
     println!(
         "body: {} bytes ({ct}); {}",
         body.len(),
@@ -139,41 +269,10 @@ async fn main() {
     let all = Arc::new(Mutex::new(Window::default()));
     let slots = Arc::new(tokio::sync::Semaphore::new(conc));
     let start = Instant::now();
-    let end = start + Duration::from_secs_f64(secs);
-    let cpu0 = cpu_seconds(&pid);
-    let self_cpu0 = cpu_seconds("self");
-    let rss0 = rss_kb(&pid);
+    let end = start + Duration::from_secs_f64(o.secs);
+    let before = Usage::now(&o.pid);
 
-    // Periodic report.
-    let reporter = {
-        let (window, pid) = (window.clone(), pid.clone());
-        tokio::spawn(async move {
-            if every <= 0.0 {
-                return;
-            }
-            let mut t = tokio::time::interval_at(
-                tokio::time::Instant::now() + Duration::from_secs_f64(every),
-                Duration::from_secs_f64(every),
-            );
-            loop {
-                t.tick().await;
-                let w = std::mem::take(&mut *window.lock().unwrap());
-                let mut l = w.lat;
-                l.sort_by(|a, b| a.partial_cmp(b).unwrap());
-                let (rss, _) = rss_kb(&pid).unwrap_or((0, 0));
-                println!(
-                    "t={:>6.0}s  {:>6} ok  {:>3} errors  {:>7.1} rec/s  p50 {:>6.2} ms  p99 {:>6.2} ms  server RSS {:.1} MB",
-                    start.elapsed().as_secs_f64(),
-                    l.len(),
-                    w.errors,
-                    l.len() as f64 / every,
-                    percentile(&l, 0.5),
-                    percentile(&l, 0.99),
-                    rss as f64 / 1024.0
-                );
-            }
-        })
-    };
+    let reporter = spawn_reporter(window.clone(), o.pid.clone(), o.every, start);
 
     let late = Arc::new(std::sync::atomic::AtomicUsize::new(0));
     let mut tasks = Vec::new();
@@ -184,7 +283,7 @@ async fn main() {
         } else {
             Instant::now()
         };
-        if due >= end || (requests > 0 && i >= requests) {
+        if due >= end || (o.requests > 0 && i >= o.requests) {
             break;
         }
         if rate > 0.0 {
@@ -202,49 +301,20 @@ async fn main() {
         if Instant::now() >= end {
             break;
         }
-        let (client, body, url, key, q) = (
-            client.clone(),
-            body_bytes.clone(),
-            url.clone(),
-            key.clone(),
-            q.clone(),
-        );
-        let (window, all) = (window.clone(), all.clone());
-        let m = i % machines.max(1);
+        let request = Request {
+            client: client.clone(),
+            url: o.url.clone(),
+            key: o.key.clone(),
+            q: q.clone(),
+            ct,
+            body: body_bytes.clone(),
+            m: i % o.machines.max(1),
+            i,
+            windows: [window.clone(), all.clone()],
+        };
         tasks.push(tokio::spawn(async move {
             let _permit = permit;
-            let t = Instant::now();
-            let r = client
-                .post(format!("{url}/v1/machines/load-{m}/records{q}"))
-                .bearer_auth(&key)
-                .header("content-type", ct)
-                .header(
-                    "idempotency-key",
-                    format!("load-{i}-{}", std::process::id()),
-                )
-                .body(body)
-                .send()
-                .await;
-            let ok = match r {
-                Ok(r) if r.status() == 201 => r.bytes().await.is_ok(),
-                Ok(r) => {
-                    eprintln!("{}: {}", r.status(), r.text().await.unwrap_or_default());
-                    false
-                }
-                Err(e) => {
-                    eprintln!("{e}");
-                    false
-                }
-            };
-            let dt = t.elapsed().as_secs_f64();
-            for w in [&window, &all] {
-                let mut w = w.lock().unwrap();
-                if ok {
-                    w.lat.push(dt);
-                } else {
-                    w.errors += 1;
-                }
-            }
+            request.send().await;
         }));
         i += 1;
         if tasks.len() > 4 * conc {
@@ -257,6 +327,31 @@ async fn main() {
     reporter.abort();
     let wall = start.elapsed().as_secs_f64();
     let all = std::mem::take(&mut *all.lock().unwrap());
+    let late = late.load(std::sync::atomic::Ordering::Relaxed);
+    report(&o, all, late, wall, &before);
+}
+
+/// CPU seconds of the server and of this process, and the server's memory, at one moment.
+struct Usage {
+    server_cpu: Option<(f64, f64)>,
+    self_cpu: Option<(f64, f64)>,
+    rss: Option<(u64, u64)>,
+}
+
+impl Usage {
+    fn now(pid: &str) -> Self {
+        Usage {
+            server_cpu: cpu_seconds(pid),
+            self_cpu: cpu_seconds("self"),
+            rss: rss_kb(pid),
+        }
+    }
+}
+
+/// The run's totals: throughput, latency percentiles, CPU per record and memory, as text and
+/// as one JSON line.
+fn report(o: &Options, all: Window, late: usize, wall: f64, before: &Usage) {
+    let (format, rate, conc, pid) = (&o.format, o.rate, o.conc, &o.pid);
     let mut lat = all.lat;
     lat.sort_by(|a, b| a.partial_cmp(b).unwrap());
     let n = lat.len();
@@ -264,7 +359,7 @@ async fn main() {
         "{n} records in {wall:.1} s = {:.1} records/s, {} errors, {} late",
         n as f64 / wall,
         all.errors,
-        late.load(std::sync::atomic::Ordering::Relaxed)
+        late
     );
     let (p50, p90, p99, max) = (
         percentile(&lat, 0.5),
@@ -277,11 +372,11 @@ async fn main() {
         (Some(a), Some(b)) if n > 0 => ((b.0 - a.0) / n as f64 * 1e3, (b.1 - a.1) / n as f64 * 1e3),
         _ => (f64::NAN, f64::NAN),
     };
-    let (server_user, server_kernel) = per_record(cpu0, cpu_seconds(&pid));
+    let (server_user, server_kernel) = per_record(before.server_cpu, cpu_seconds(pid));
     let server_cpu = server_user + server_kernel;
-    let (client_user, client_kernel) = per_record(self_cpu0, cpu_seconds("self"));
+    let (client_user, client_kernel) = per_record(before.self_cpu, cpu_seconds("self"));
     let client_cpu = client_user + client_kernel;
-    let rss1 = rss_kb(&pid);
+    let (rss0, rss1) = (before.rss, rss_kb(pid));
     if !pid.is_empty() {
         println!(
             "server CPU per record {server_cpu:.2} ms (user {server_user:.2}, kernel {server_kernel:.2}), \
@@ -295,7 +390,7 @@ async fn main() {
     println!(
         "{}",
         serde_json::json!({
-            "records": n, "errors": all.errors, "late": late.load(std::sync::atomic::Ordering::Relaxed),
+            "records": n, "errors": all.errors, "late": late,
             "seconds": wall, "records_per_second": n as f64 / wall,
             "p50_ms": p50, "p90_ms": p90, "p99_ms": p99, "max_ms": max,
             "server_cpu_ms_per_record": server_cpu, "client_cpu_ms_per_record": client_cpu,

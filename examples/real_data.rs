@@ -97,190 +97,15 @@ fn main() {
     );
     let mut summary = Vec::new();
     for ch in &channels {
-        let files: Vec<(bool, u32)> = LOADS
-            .iter()
-            .flat_map(|&l| [(true, l), (false, l)])
-            .collect();
-        let data: Vec<FileData> = files
-            .par_iter()
-            .map(|&(healthy, load)| {
-                let name = format!("{}30hz{load}.csv.gz", if healthy { "h" } else { "b" });
-                let rec = read_record(
-                    &dir.join(&name),
-                    &ReadOptions {
-                        sample_rate: Some(FS),
-                        column: Some(Column::Name(ch.clone())),
-                        ..Default::default()
-                    },
-                )
-                .unwrap_or_else(|e| panic!("{name}: {e}"));
-                let segs = split_record(&rec, segments);
-                let with = segs
-                    .iter()
-                    .map(|s| {
-                        record_features(s, Some(&gb), Some(SHAFT_HZ))
-                            .expect("features")
-                            .with_group(name.clone())
-                    })
-                    .collect();
-                let without = segs
-                    .iter()
-                    .map(|s| {
-                        record_features(s, None, None)
-                            .expect("features")
-                            .with_group(name.clone())
-                    })
-                    .collect();
-                FileData {
-                    healthy,
-                    load,
-                    whole: rec,
-                    with,
-                    without,
-                }
-            })
-            .collect();
+        let data = read_channel(&dir, ch, segments, &gb);
         println!("## Channel {ch}\n");
         for (label, pick) in [
             ("with the description", true),
             ("without a description", false),
         ] {
-            let feats = |d: &FileData| {
-                if pick {
-                    d.with.clone()
-                } else {
-                    d.without.clone()
-                }
-            };
-            println!("### Novelty, {label}\n");
-            println!(
-                "| load | threshold | healthy segment scores | broken segment scores | healthy file | broken file | top features of the broken file |"
-            );
-            println!("| --- | --- | --- | --- | --- | --- | --- |");
-            let (mut hs, mut bs) = (Vec::new(), Vec::new());
-            let (mut fa_seg, mut miss_seg, mut fa_file, mut miss_file) = (0, 0, 0, 0);
-            let mut n_seg = 0;
-            for &l in &LOADS {
-                let base: Vec<RecordFeatures> = data
-                    .iter()
-                    .filter(|d| d.healthy && d.load != l)
-                    .flat_map(feats)
-                    .collect();
-                let b = MachineBaseline::fit(&base).expect("baseline");
-                eprintln!(
-                    "{ch} {label} load {l}: leave-one-file-out scores {:?}",
-                    b.loo_scores
-                        .iter()
-                        .map(|s| (s * 100.0).round() / 100.0)
-                        .collect::<Vec<_>>()
-                );
-                let score = |healthy: bool| -> (Vec<f64>, Vec<bool>, Vec<String>) {
-                    let d = data
-                        .iter()
-                        .find(|d| d.healthy == healthy && d.load == l)
-                        .unwrap();
-                    let nv: Vec<_> = feats(d).iter().map(|f| b.score(f)).collect();
-                    let top: Vec<String> = nv[0]
-                        .top_features
-                        .iter()
-                        .take(3)
-                        .map(|z| format!("{} {:+.1}", z.name, z.z))
-                        .collect();
-                    (
-                        nv.iter().map(|n| n.score / n.threshold).collect(),
-                        nv.iter().map(|n| n.anomalous).collect(),
-                        top,
-                    )
-                };
-                let (h, ha, _) = score(true);
-                let (k, ka, top) = score(false);
-                let fmt = |v: &[f64]| {
-                    v.iter()
-                        .map(|r| format!("{:.2}", r * b.threshold))
-                        .collect::<Vec<_>>()
-                        .join(" ")
-                };
-                let hf = median(h.clone()) > 1.0;
-                let kf = median(k.clone()) > 1.0;
-                fa_seg += ha.iter().filter(|a| **a).count();
-                miss_seg += ka.iter().filter(|a| !**a).count();
-                n_seg += ha.len();
-                fa_file += hf as usize;
-                miss_file += (!kf) as usize;
-                println!(
-                    "| {l} % | {:.2} | {} | {} | {} | {} | {} |",
-                    b.threshold,
-                    fmt(&h),
-                    fmt(&k),
-                    if hf { "**anomalous**" } else { "ok" },
-                    if kf { "anomalous" } else { "**ok (miss)**" },
-                    top.join(", ")
-                );
-                hs.extend(h);
-                bs.extend(k);
-            }
-            let a = auc(&bs, &hs);
-            println!(
-                "\nAUC (broken vs healthy segments, score/threshold) = {a:.3}; segments: {fa_seg} false alarms of {n_seg}, {miss_seg} misses of {n_seg}; files: {fa_file} false alarms of 5, {miss_file} misses of 5\n"
-            );
-            summary.push(format!(
-                "| {ch} | {label} | {a:.3} | {fa_seg}/{n_seg} | {miss_seg}/{n_seg} | {fa_file}/5 | {miss_file}/5 |"
-            ));
+            summary.push(novelty_table(ch, label, pick, &data));
         }
-
-        // Whole files: the model-based diagnosis and the TSA metrics.
-        println!("### Whole files: wear degree, fit, TSA metrics ({ch})\n");
-        println!(
-            "| file | wear (paper table) | χ²/feature | wear (described table) | χ²/feature | input FM0 | FM4 | NA4 | NB4 | M6A | M8A | ER | SLF | output FM4 | NA4 | SLF |"
-        );
-        println!(
-            "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
-        );
-        let rows: Vec<String> = data
-            .par_iter()
-            .map(|d| {
-                let name = format!("{}30hz{}", if d.healthy { "h" } else { "b" }, d.load);
-                let opts = DiagnoseOptions::default();
-                let w = |t: &SignatureTable| match diagnose(&d.whole, t, &opts) {
-                    Ok(x) => (
-                        format!("{:.2}", x.wear_degree.estimate),
-                        format!("{:.1}", x.fit.chi2_per_feature),
-                    ),
-                    Err(e) => (format!("error: {e}"), "–".into()),
-                };
-                let (wp, cp) = w(&paper_table);
-                let (ws, cs) = sq_table.as_ref().map_or(("no table".into(), "–".into()), w);
-                let oa = order_analysis(&d.whole.samples, FS, &gb, gb.f1_hz(SHAFT_HZ), 0.03);
-                let m: BTreeMap<String, _> = oa
-                    .map(|a| {
-                        a.shafts
-                            .into_iter()
-                            .map(|s| (s.shaft, s.metrics))
-                            .collect()
-                    })
-                    .unwrap_or_default();
-                let i = m.get("input");
-                let o = m.get("output");
-                format!(
-                    "| {name} | {wp} | {cp} | {ws} | {cs} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
-                    f2(i.and_then(|m| m.fm0)),
-                    f2(i.and_then(|m| m.fm4)),
-                    f2(i.and_then(|m| m.na4)),
-                    f2(i.and_then(|m| m.nb4)),
-                    f2(i.and_then(|m| m.m6a)),
-                    f2(i.and_then(|m| m.m8a)),
-                    f2(i.and_then(|m| m.er)),
-                    f2(i.and_then(|m| m.slf)),
-                    f2(o.and_then(|m| m.fm4)),
-                    f2(o.and_then(|m| m.na4)),
-                    f2(o.and_then(|m| m.slf)),
-                )
-            })
-            .collect();
-        for r in rows {
-            println!("{r}");
-        }
-        println!();
+        whole_files(ch, &data, &gb, &paper_table, sq_table.as_ref());
     }
     println!("## Summary\n");
     println!(
@@ -290,4 +115,201 @@ fn main() {
     for s in summary {
         println!("{s}");
     }
+}
+
+/// Every file of channel `ch` (healthy and broken at each load), cut into `segments` records,
+/// with their features with and without the description `gb`.
+fn read_channel(dir: &Path, ch: &str, segments: usize, gb: &Gearbox) -> Vec<FileData> {
+    let files: Vec<(bool, u32)> = LOADS
+        .iter()
+        .flat_map(|&l| [(true, l), (false, l)])
+        .collect();
+    files
+        .par_iter()
+        .map(|&(healthy, load)| {
+            let name = format!("{}30hz{load}.csv.gz", if healthy { "h" } else { "b" });
+            let rec = read_record(
+                &dir.join(&name),
+                &ReadOptions {
+                    sample_rate: Some(FS),
+                    column: Some(Column::Name(ch.to_string())),
+                    ..Default::default()
+                },
+            )
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+            let segs = split_record(&rec, segments);
+            let with = segs
+                .iter()
+                .map(|s| {
+                    record_features(s, Some(gb), Some(SHAFT_HZ))
+                        .expect("features")
+                        .with_group(name.clone())
+                })
+                .collect();
+            let without = segs
+                .iter()
+                .map(|s| {
+                    record_features(s, None, None)
+                        .expect("features")
+                        .with_group(name.clone())
+                })
+                .collect();
+            FileData {
+                healthy,
+                load,
+                whole: rec,
+                with,
+                without,
+            }
+        })
+        .collect()
+}
+
+/// The novelty table of one channel, with the description's features (`pick`) or without:
+/// per load, the baseline of the other loads' healthy segments scores that load's healthy and
+/// broken segments. Prints the table and the AUC; returns the summary row.
+fn novelty_table(ch: &str, label: &str, pick: bool, data: &[FileData]) -> String {
+    let feats = |d: &FileData| {
+        if pick {
+            d.with.clone()
+        } else {
+            d.without.clone()
+        }
+    };
+    println!("### Novelty, {label}\n");
+    println!(
+        "| load | threshold | healthy segment scores | broken segment scores | healthy file | broken file | top features of the broken file |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- | --- |");
+    let (mut hs, mut bs) = (Vec::new(), Vec::new());
+    let (mut fa_seg, mut miss_seg, mut fa_file, mut miss_file) = (0, 0, 0, 0);
+    let mut n_seg = 0;
+    for &l in &LOADS {
+        let base: Vec<RecordFeatures> = data
+            .iter()
+            .filter(|d| d.healthy && d.load != l)
+            .flat_map(feats)
+            .collect();
+        let b = MachineBaseline::fit(&base).expect("baseline");
+        eprintln!(
+            "{ch} {label} load {l}: leave-one-file-out scores {:?}",
+            b.loo_scores
+                .iter()
+                .map(|s| (s * 100.0).round() / 100.0)
+                .collect::<Vec<_>>()
+        );
+        let score = |healthy: bool| -> (Vec<f64>, Vec<bool>, Vec<String>) {
+            let d = data
+                .iter()
+                .find(|d| d.healthy == healthy && d.load == l)
+                .unwrap();
+            let nv: Vec<_> = feats(d).iter().map(|f| b.score(f)).collect();
+            let top: Vec<String> = nv[0]
+                .top_features
+                .iter()
+                .take(3)
+                .map(|z| format!("{} {:+.1}", z.name, z.z))
+                .collect();
+            (
+                nv.iter().map(|n| n.score / n.threshold).collect(),
+                nv.iter().map(|n| n.anomalous).collect(),
+                top,
+            )
+        };
+        let (h, ha, _) = score(true);
+        let (k, ka, top) = score(false);
+        let fmt = |v: &[f64]| {
+            v.iter()
+                .map(|r| format!("{:.2}", r * b.threshold))
+                .collect::<Vec<_>>()
+                .join(" ")
+        };
+        let hf = median(h.clone()) > 1.0;
+        let kf = median(k.clone()) > 1.0;
+        fa_seg += ha.iter().filter(|a| **a).count();
+        miss_seg += ka.iter().filter(|a| !**a).count();
+        n_seg += ha.len();
+        fa_file += hf as usize;
+        miss_file += (!kf) as usize;
+        println!(
+            "| {l} % | {:.2} | {} | {} | {} | {} | {} |",
+            b.threshold,
+            fmt(&h),
+            fmt(&k),
+            if hf { "**anomalous**" } else { "ok" },
+            if kf { "anomalous" } else { "**ok (miss)**" },
+            top.join(", ")
+        );
+        hs.extend(h);
+        bs.extend(k);
+    }
+    let a = auc(&bs, &hs);
+    println!(
+        "\nAUC (broken vs healthy segments, score/threshold) = {a:.3}; segments: {fa_seg} false alarms of {n_seg}, {miss_seg} misses of {n_seg}; files: {fa_file} false alarms of 5, {miss_file} misses of 5\n"
+    );
+    format!(
+        "| {ch} | {label} | {a:.3} | {fa_seg}/{n_seg} | {miss_seg}/{n_seg} | {fa_file}/5 | {miss_file}/5 |"
+    )
+}
+
+/// Whole files: the model-based diagnosis and the TSA metrics.
+fn whole_files(
+    ch: &str,
+    data: &[FileData],
+    gb: &Gearbox,
+    paper_table: &SignatureTable,
+    sq_table: Option<&SignatureTable>,
+) {
+    println!("### Whole files: wear degree, fit, TSA metrics ({ch})\n");
+    println!(
+        "| file | wear (paper table) | χ²/feature | wear (described table) | χ²/feature | input FM0 | FM4 | NA4 | NB4 | M6A | M8A | ER | SLF | output FM4 | NA4 | SLF |"
+    );
+    println!(
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+    );
+    let rows: Vec<String> = data
+        .par_iter()
+        .map(|d| {
+            let name = format!("{}30hz{}", if d.healthy { "h" } else { "b" }, d.load);
+            let opts = DiagnoseOptions::default();
+            let w = |t: &SignatureTable| match diagnose(&d.whole, t, &opts) {
+                Ok(x) => (
+                    format!("{:.2}", x.wear_degree.estimate),
+                    format!("{:.1}", x.fit.chi2_per_feature),
+                ),
+                Err(e) => (format!("error: {e}"), "–".into()),
+            };
+            let (wp, cp) = w(paper_table);
+            let (ws, cs) = sq_table.map_or(("no table".into(), "–".into()), w);
+            let oa = order_analysis(&d.whole.samples, FS, gb, gb.f1_hz(SHAFT_HZ), 0.03);
+            let m: BTreeMap<String, _> = oa
+                .map(|a| {
+                    a.shafts
+                        .into_iter()
+                        .map(|s| (s.shaft, s.metrics))
+                        .collect()
+                })
+                .unwrap_or_default();
+            let i = m.get("input");
+            let o = m.get("output");
+            format!(
+                "| {name} | {wp} | {cp} | {ws} | {cs} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                f2(i.and_then(|m| m.fm0)),
+                f2(i.and_then(|m| m.fm4)),
+                f2(i.and_then(|m| m.na4)),
+                f2(i.and_then(|m| m.nb4)),
+                f2(i.and_then(|m| m.m6a)),
+                f2(i.and_then(|m| m.m8a)),
+                f2(i.and_then(|m| m.er)),
+                f2(i.and_then(|m| m.slf)),
+                f2(o.and_then(|m| m.fm4)),
+                f2(o.and_then(|m| m.na4)),
+                f2(o.and_then(|m| m.slf)),
+            )
+        })
+        .collect();
+    for r in rows {
+        println!("{r}");
+    }
+    println!();
 }

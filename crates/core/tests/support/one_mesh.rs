@@ -1,6 +1,6 @@
 //! A single mesh with backlash: an exact piecewise closed-form reference, shared by
-//! `tests/physics.rs` and `benches/solvers.rs` (included in both with `#[path]`), and the same
-//! mesh built through the generic assembly.
+//! `tests/physics.rs` and `benches/solvers/main.rs` (included in both with `#[path]`), and the
+//! same mesh built through the generic assembly.
 //!
 //! `x'' + c x' + k f_b(x) = F + a Ω² sin(Ω τ + φ)`, with `f_b` the backlash dead zone of half
 //! width `b`: linear in each region, so each region has a closed form and only the switches
