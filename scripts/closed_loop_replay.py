@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """Replay the closed loop's selection over the stored candidates of benchmark rows.
 
-`benches/closed_loop.rs` stores each record's candidates (`CL_OUT` rows; since session 14 with
-the reasons a candidate was refused and a pair's member shares). The selection of
+`benches/closed_loop.rs` stores each record's candidates (its rows: `CL_OUT`, by default
+`target/bench/closed_loop.json` or `$CARGO_TARGET_DIR/bench/closed_loop.json`; since session 14
+with the reasons a candidate was refused and a pair's member shares). The selection of
 `closed_loop::calibrate` depends on nothing else, so a rule of the selection can be changed
 here and its effect on naming, false claims, clean and non-library records read off without
 simulating anything again. This reproduces the stored answers exactly at the rules the rows

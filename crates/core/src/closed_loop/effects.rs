@@ -232,6 +232,97 @@ pub fn build_model(gb: &Gearbox, p: &ElementParams) -> Result<DimensionlessModel
     asm.resolve()
 }
 
+/// A shaft modulation of sideband amplitude `e` (units of b) on `shaft`.
+fn effect_shaft(e: f64, shaft: &MeshGear) -> Effect {
+    let mut p = BTreeMap::new();
+    p.insert("sideband_amplitude_b".into(), e);
+    p.insert("shaft_ratio".into(), shaft.shaft_ratio);
+    let mut l = BTreeMap::new();
+    l.insert("shaft".into(), shaft.shaft.clone());
+    Effect {
+        name: SHAFT_MODULATION.into(),
+        kind: "element",
+        parameters: p,
+        labels: l,
+    }
+}
+
+/// A path resonance as the report names it (`res.rho` over f1; `f1` in Hz).
+pub(crate) fn effect_resonance(res: &Resonance, f1: f64) -> Effect {
+    let mut p = BTreeMap::new();
+    p.insert("frequency_ratio".into(), res.rho);
+    p.insert("frequency_hz".into(), res.rho * f1);
+    p.insert("damping_ratio".into(), res.zeta);
+    if let Some(g) = res.peak_gain {
+        p.insert("peak_gain".into(), g);
+    }
+    let mut l = BTreeMap::new();
+    l.insert("form".into(), res.form().to_string());
+    Effect {
+        name: PATH_RESONANCE.into(),
+        kind: "sensor-stage",
+        parameters: p,
+        labels: l,
+    }
+}
+
+/// Planetary wear of composite-error amplitude `pl` (units of b).
+fn effect_planetary(pl: f64) -> Effect {
+    let mut p = BTreeMap::new();
+    p.insert("planetary_error_b".into(), pl);
+    Effect {
+        name: PLANETARY_WEAR.into(),
+        kind: "element",
+        parameters: p,
+        labels: BTreeMap::new(),
+    }
+}
+
+/// A damaged tooth of stiffness loss `depth` on `gear`.
+fn effect_tooth(depth: f64, gear: &MeshGear) -> Effect {
+    let mut p = BTreeMap::new();
+    p.insert("stiffness_loss".into(), depth);
+    p.insert("shaft_ratio".into(), gear.shaft_ratio);
+    p.insert("teeth".into(), gear.teeth as f64);
+    let mut l = BTreeMap::new();
+    l.insert("gear".into(), format!("stage-1 {}", gear.member));
+    l.insert("shaft".into(), gear.shaft.clone());
+    Effect {
+        name: TOOTH_DAMAGE.into(),
+        kind: "element",
+        parameters: p,
+        labels: l,
+    }
+}
+
+/// The effects of an element parameter set (given the gears and shafts they name).
+pub(crate) fn element_effects(
+    p: &ElementParams,
+    baseline: f64,
+    gears: &[MeshGear],
+    input: &MeshGear,
+) -> Vec<Effect> {
+    let mut v = Vec::new();
+    if p.eccentricity > 0.0 {
+        let sh = gears
+            .iter()
+            .find(|g| p.ecc_shaft > 0.0 && (g.shaft_ratio - p.ecc_shaft).abs() < 1e-12)
+            .unwrap_or(input);
+        v.push(effect_shaft(p.eccentricity, sh));
+    }
+    if p.planetary > baseline + 1e-12 {
+        v.push(effect_planetary(p.planetary));
+    }
+    if p.tooth_depth > 0.0
+        && let Some(g) = gears
+            .iter()
+            .find(|g| (g.shaft_ratio - p.tooth_shaft).abs() < 1e-12)
+    {
+        v.push(effect_tooth(p.tooth_depth, g));
+    }
+    v
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

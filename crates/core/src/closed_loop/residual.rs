@@ -95,13 +95,25 @@ pub(crate) fn annotate(
     f1: f64,
     sidebands: &[SidebandCheck],
 ) {
-    let step_hz = f1 / GRID_PERIODS;
-    let tol_hz = 1.5 * step_hz;
     let extra: Vec<usize> = (0..features.len())
         .filter(|&i| features[i].kind == "extra")
         .collect();
     let shafts = shaft_rates(gb);
-    // 1. mains: odd harmonics of 50 or 60 Hz.
+    guess_mains(features, &extra, f1);
+    guess_fluctuation(features, &extra, &shafts, f1, sidebands);
+    guess_harmonics(features, &extra, f1);
+    // 4–6.
+    for f in features.iter_mut() {
+        if f.guess.is_empty() {
+            f.guess = guess_rest(f, gb, &shafts);
+        }
+    }
+}
+
+/// Guess 1, mains: odd harmonics of 50 or 60 Hz among the `extra` features.
+fn guess_mains(features: &mut [ResidualFeature], extra: &[usize], f1: f64) {
+    let step_hz = f1 / GRID_PERIODS;
+    let tol_hz = 1.5 * step_hz;
     for mains in [50.0, 60.0] {
         let near = |f: f64| -> Option<u32> {
             let k = (f / mains).round();
@@ -128,53 +140,68 @@ pub(crate) fn annotate(
             }
         }
     }
-    // 2. sidebands off every shaft's rate: a speed or load fluctuation.
-    // (Not when the spacing is a low harmonic of some shaft's rate: that shaft's own
-    // sidebands, guessed below as synchronous.)
+}
+
+/// Guess 2, sidebands off every shaft's rate: a speed or load fluctuation. (Not when the
+/// spacing is a low harmonic of some shaft's rate: that shaft's own sidebands, guessed as
+/// synchronous.)
+fn guess_fluctuation(
+    features: &mut [ResidualFeature],
+    extra: &[usize],
+    shafts: &[(String, f64)],
+    f1: f64,
+    sidebands: &[SidebandCheck],
+) {
     let synchronous = |c: &SidebandCheck| {
         shafts.iter().any(|(_, v)| {
             (1..=3).any(|m| (c.spacing_ratio - m as f64 * v).abs() <= 0.75 * c.resolution_ratio)
         })
     };
-    if let Some(off) = sidebands.iter().find(|c| c.off_rate && !synchronous(c)) {
-        let d = off.spacing_ratio;
-        for &i in &extra {
-            if !features[i].guess.is_empty() {
-                continue;
-            }
-            let r = features[i].frequency_ratio;
-            let hit = [1.0f64, 2.0].iter().find_map(|&a| {
-                (-3i32..=3)
-                    .filter(|n| *n != 0)
-                    .find(|&n| (a + n as f64 * d - r).abs() <= 0.75 / GRID_PERIODS)
-                    .map(|n| (a, n))
-            });
-            if let Some((a, n)) = hit {
-                // The shaft whose rate lies nearest the spacing, for the reader (when it is
-                // not the checked shaft itself).
-                let near = shafts
-                    .iter()
-                    .min_by(|x, y| (x.1 - d).abs().total_cmp(&(y.1 - d).abs()))
-                    .filter(|(name, _)| *name != off.shaft)
-                    .map_or(String::new(), |(name, v)| {
-                        format!(" (the nearest shaft rate: `{name}`, {:.1} Hz)", v * f1)
-                    });
-                features[i].guess = format!(
-                    "a sideband ({a:.0} f1 {n:+} × {:.1} Hz) of the mesh line: the record's \
-                     sidebands lie {:.1} Hz apart, off the rate of shaft `{}` ({:.1} Hz){near} \
-                     — the speed or the load fluctuates at {:.1} Hz; check the drive's speed \
-                     control and the driven load",
-                    off.spacing_hz,
-                    off.spacing_hz,
-                    off.shaft,
-                    off.shaft_ratio * f1,
-                    off.spacing_hz
-                );
-            }
+    let Some(off) = sidebands.iter().find(|c| c.off_rate && !synchronous(c)) else {
+        return;
+    };
+    let d = off.spacing_ratio;
+    for &i in extra {
+        if !features[i].guess.is_empty() {
+            continue;
+        }
+        let r = features[i].frequency_ratio;
+        let hit = [1.0f64, 2.0].iter().find_map(|&a| {
+            (-3i32..=3)
+                .filter(|n| *n != 0)
+                .find(|&n| (a + n as f64 * d - r).abs() <= 0.75 / GRID_PERIODS)
+                .map(|n| (a, n))
+        });
+        if let Some((a, n)) = hit {
+            // The shaft whose rate lies nearest the spacing, for the reader (when it is
+            // not the checked shaft itself).
+            let near = shafts
+                .iter()
+                .min_by(|x, y| (x.1 - d).abs().total_cmp(&(y.1 - d).abs()))
+                .filter(|(name, _)| *name != off.shaft)
+                .map_or(String::new(), |(name, v)| {
+                    format!(" (the nearest shaft rate: `{name}`, {:.1} Hz)", v * f1)
+                });
+            features[i].guess = format!(
+                "a sideband ({a:.0} f1 {n:+} × {:.1} Hz) of the mesh line: the record's \
+                 sidebands lie {:.1} Hz apart, off the rate of shaft `{}` ({:.1} Hz){near} \
+                 — the speed or the load fluctuates at {:.1} Hz; check the drive's speed \
+                 control and the driven load",
+                off.spacing_hz,
+                off.spacing_hz,
+                off.shaft,
+                off.shaft_ratio * f1,
+                off.spacing_hz
+            );
         }
     }
-    // 3. harmonics of a stronger extra line.
-    for &i in &extra {
+}
+
+/// Guess 3, harmonics of a stronger extra line.
+fn guess_harmonics(features: &mut [ResidualFeature], extra: &[usize], f1: f64) {
+    let step_hz = f1 / GRID_PERIODS;
+    let tol_hz = 1.5 * step_hz;
+    for &i in extra {
         if !features[i].guess.is_empty() {
             continue;
         }
@@ -195,67 +222,65 @@ pub(crate) fn annotate(
             );
         }
     }
-    // 4–6.
-    let meshes: Vec<f64> = gb.mesh_ratios.clone();
-    let tol_r = 0.5 / GRID_PERIODS;
-    for f in features.iter_mut() {
-        if !f.guess.is_empty() {
-            continue;
-        }
-        let r = f.frequency_ratio;
-        if f.kind == "missing" {
-            f.guess = format!(
-                "the model has a line at {:.1} Hz ({r:.3} f1) that the record lacks \
-                 ({:.1} dB): the description, the sensor position or an over-predicted line",
-                f.frequency_hz, f.size_db
-            );
-            continue;
-        }
-        if f.width_ratio > 0.05 {
-            f.guess = format!(
-                "a raised band around {:.0} Hz ({:.2} f1 wide, {:+.1} dB): broadband noise, \
-                 impacts or noise bursts — not a line",
-                f.frequency_hz, f.width_ratio, f.size_db
-            );
-            continue;
-        }
-        let mut sync: Option<String> = None;
-        'outer: for (name, s) in &shafts {
-            for a in 0..=2 {
-                for n in -3i32..=3 {
-                    if a == 0 && n <= 0 {
-                        continue;
-                    }
-                    if (a as f64 + n as f64 * s - r).abs() <= tol_r {
-                        sync = Some(if a == 0 {
-                            format!("order {n} of shaft `{name}`")
-                        } else {
-                            format!("{a} f1 {:+} × shaft `{name}`", n)
-                        });
-                        break 'outer;
-                    }
-                }
-            }
-        }
-        if sync.is_none() {
-            for (k, fk) in meshes.iter().enumerate().skip(1) {
-                let h = (r / fk).round();
-                if (1.0..=4.0).contains(&h) && (r - h * fk).abs() <= tol_r {
-                    sync = Some(format!("{h:.0} × the stage-{} mesh frequency", k + 1));
-                    break;
-                }
-            }
-        }
-        f.guess = match sync {
-            Some(w) => format!(
-                "a line at {:.1} Hz synchronous with the gearbox ({w}) that the model does not \
-                 make: misalignment, a coupling, or a fault the library does not hold",
-                f.frequency_hz
-            ),
-            None => format!(
-                "a non-synchronous line at {:.1} Hz ({:+.1} dB): a bearing or another machine?",
-                f.frequency_hz, f.size_db
-            ),
-        };
+}
+
+/// Guesses 4–6 of a feature no earlier guess explained: a missing line, a broadband run, a
+/// line synchronous with the gearbox, or a non-synchronous one.
+fn guess_rest(f: &ResidualFeature, gb: &Gearbox, shafts: &[(String, f64)]) -> String {
+    let r = f.frequency_ratio;
+    if f.kind == "missing" {
+        return format!(
+            "the model has a line at {:.1} Hz ({r:.3} f1) that the record lacks \
+             ({:.1} dB): the description, the sensor position or an over-predicted line",
+            f.frequency_hz, f.size_db
+        );
     }
+    if f.width_ratio > 0.05 {
+        return format!(
+            "a raised band around {:.0} Hz ({:.2} f1 wide, {:+.1} dB): broadband noise, \
+             impacts or noise bursts — not a line",
+            f.frequency_hz, f.width_ratio, f.size_db
+        );
+    }
+    match synchronous_with(r, &gb.mesh_ratios, shafts) {
+        Some(w) => format!(
+            "a line at {:.1} Hz synchronous with the gearbox ({w}) that the model does not \
+             make: misalignment, a coupling, or a fault the library does not hold",
+            f.frequency_hz
+        ),
+        None => format!(
+            "a non-synchronous line at {:.1} Hz ({:+.1} dB): a bearing or another machine?",
+            f.frequency_hz, f.size_db
+        ),
+    }
+}
+
+/// What a line at `r` (over f1) is synchronous with, within half a grid step: `a f1 + n f_s`
+/// (a = 0, 1, 2; |n| ≤ 3; f_s a shaft's rate), or a multiple (1–4) of another stage's mesh
+/// frequency (`meshes`, over f1; the first is stage 1's).
+fn synchronous_with(r: f64, meshes: &[f64], shafts: &[(String, f64)]) -> Option<String> {
+    let tol_r = 0.5 / GRID_PERIODS;
+    for (name, s) in shafts {
+        for a in 0..=2 {
+            for n in -3i32..=3 {
+                if a == 0 && n <= 0 {
+                    continue;
+                }
+                if (a as f64 + n as f64 * s - r).abs() <= tol_r {
+                    return Some(if a == 0 {
+                        format!("order {n} of shaft `{name}`")
+                    } else {
+                        format!("{a} f1 {:+} × shaft `{name}`", n)
+                    });
+                }
+            }
+        }
+    }
+    for (k, fk) in meshes.iter().enumerate().skip(1) {
+        let h = (r / fk).round();
+        if (1.0..=4.0).contains(&h) && (r - h * fk).abs() <= tol_r {
+            return Some(format!("{h:.0} × the stage-{} mesh frequency", k + 1));
+        }
+    }
+    None
 }
