@@ -63,10 +63,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::gearbox::Gearbox;
 use crate::record::Record;
-use crate::signal::order::{
-    MeshTrackOptions, TrackSummary, angular_resample, samples_per_rev_for, track_mesh_phase_with,
-};
-use crate::signal::tsa::{GearMetrics, gear_metrics_and_signals, tsa};
+pub use crate::signal::tsa::{MAX_SAMPLES_PER_REV, MIN_TSA_REVS, OrderAnalysis, ShaftTsa};
 use crate::signal::{Window, kurtosis, median, welch};
 use crate::{Error, Result};
 
@@ -78,10 +75,6 @@ pub const SCALE_FLOOR: f64 = 0.1;
 pub const TOP_K: usize = 3;
 /// Smallest threshold: a record is never anomalous with its top features within 3 scales.
 pub const MIN_THRESHOLD: f64 = 3.0;
-/// Fewest revolutions of a shaft for its TSA.
-pub const MIN_TSA_REVS: f64 = 8.0;
-/// Largest samples per revolution of a TSA (a slow shaft in a fast-sampled record).
-pub const MAX_SAMPLES_PER_REV: usize = 16_384;
 
 /// What a baseline is made of: the features of one record (one channel).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -105,40 +98,9 @@ impl RecordFeatures {
     }
 }
 
-/// The TSA of one shaft.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ShaftTsa {
-    pub shaft: String,
-    /// Rate over the tracked shaft's.
-    pub rate_ratio: f64,
-    /// Mean rate (Hz).
-    pub mean_hz: f64,
-    pub samples_per_rev: usize,
-    /// Revolutions averaged.
-    pub revolutions: usize,
-    /// Tooth counts of the gears on this shaft (whole mesh orders).
-    pub mesh_orders: Vec<usize>,
-    pub metrics: GearMetrics,
-    /// Peak amplitudes (unit of the record) of the first mesh order's harmonics k = 1..3 and
-    /// their first-order sidebands: `(order, amplitude)`.
-    pub mesh_lines: Vec<(usize, f64)>,
-}
-
-/// Order tracking and the TSA of every shaft it reaches.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct OrderAnalysis {
-    pub tracked_shaft: String,
-    pub tracking: TrackSummary,
-    /// RMS of the tracked shaft's TSA over the RMS of the resampled record: the synchronous
-    /// share.
-    pub sync_share: f64,
-    pub shafts: Vec<ShaftTsa>,
-    /// Shafts without a TSA and why.
-    pub skipped: Vec<(String, String)>,
-}
-
 /// Track the input shaft from the stage-1 mesh line near `mesh_hz_hint` (searched within
-/// `± search`, relative) and compute the TSA and its metrics for every shaft of `gb`.
+/// `± search`, relative) and compute the TSA and its metrics for every shaft of `gb`
+/// ([`crate::signal::tsa::order_analysis`] on [`Gearbox::shaft_train`]).
 ///
 /// Errors: the tracking's ([`crate::signal::order::track_mesh_phase`]); every shaft skipped is not an error.
 pub fn order_analysis(
@@ -161,109 +123,7 @@ pub fn order_analysis_with(
     search: f64,
     spectrum: Option<&crate::signal::Spectrum>,
 ) -> Result<OrderAnalysis> {
-    let z_in = gb.f1_hz(1.0);
-    let angle = track_mesh_phase_with(
-        x,
-        fs,
-        mesh_hz_hint,
-        z_in,
-        &MeshTrackOptions {
-            search,
-            ..Default::default()
-        },
-        spectrum,
-    )?;
-    let kin = gb.kinematics(1.0);
-    let input = kin.input_shaft.clone();
-    let usable_revs = angle.summary.revolutions;
-    let mut shafts = Vec::new();
-    let mut skipped = Vec::new();
-    let mut sync_share = f64::NAN;
-    // The input shaft first, then the others in name order.
-    let mut names: Vec<&String> = kin.shafts.keys().collect();
-    names.sort_by_key(|s| (**s != input, (*s).clone()));
-    for name in names {
-        let ratio = kin.shafts[name];
-        if !(ratio > 0.0) {
-            skipped.push((name.clone(), "does not turn".into()));
-            continue;
-        }
-        let revs = usable_revs * ratio;
-        if revs < MIN_TSA_REVS {
-            skipped.push((
-                name.clone(),
-                format!("{revs:.1} revolutions in the record (a TSA needs {MIN_TSA_REVS})"),
-            ));
-            continue;
-        }
-        let mut orders: Vec<usize> = kin
-            .meshes
-            .iter()
-            .filter_map(|m| {
-                let o = m.hz / ratio;
-                let r = o.round();
-                ((o - r).abs() <= 1e-6 * o && r >= 1.0).then_some(r as usize)
-            })
-            .collect();
-        orders.sort_unstable();
-        orders.dedup();
-        let mean_hz = angle.summary.mean_hz * ratio;
-        let p = samples_per_rev_for(fs, mean_hz);
-        if p > MAX_SAMPLES_PER_REV {
-            skipped.push((
-                name.clone(),
-                format!("{p} samples per revolution needed (at most {MAX_SAMPLES_PER_REV})"),
-            ));
-            continue;
-        }
-        orders.retain(|&z| z < p / 2);
-        if orders.is_empty() {
-            skipped.push((
-                name.clone(),
-                "no gear on it with a whole mesh order under the record's Nyquist frequency".into(),
-            ));
-            continue;
-        }
-        let res = angular_resample(x, &angle, ratio, p)?;
-        let avg = tsa(&res.samples, p)?;
-        let (metrics, signals) = gear_metrics_and_signals(&avg, &orders)?;
-        if *name == input {
-            let r_all = {
-                let m = res.samples.iter().sum::<f64>() / res.samples.len() as f64;
-                (res.samples.iter().map(|v| (v - m).powi(2)).sum::<f64>()
-                    / res.samples.len() as f64)
-                    .sqrt()
-            };
-            sync_share = metrics.rms / r_all;
-        }
-        let amps = signals.order_amplitudes;
-        let z = metrics.mesh_order;
-        let mut lines = Vec::new();
-        for k in 1..=3 {
-            for o in [k * z - 1, k * z, k * z + 1] {
-                if let Some(&a) = amps.get(o) {
-                    lines.push((o, a));
-                }
-            }
-        }
-        shafts.push(ShaftTsa {
-            shaft: name.clone(),
-            rate_ratio: ratio,
-            mean_hz,
-            samples_per_rev: p,
-            revolutions: res.revolutions,
-            mesh_orders: orders,
-            metrics,
-            mesh_lines: lines,
-        });
-    }
-    Ok(OrderAnalysis {
-        tracked_shaft: input,
-        tracking: angle.summary,
-        sync_share,
-        shafts,
-        skipped,
-    })
+    crate::signal::tsa::order_analysis(x, fs, &gb.shaft_train(), mesh_hz_hint, search, spectrum)
 }
 
 /// `ln v` for a positive finite `v` (floored at 1e-12), else nothing.

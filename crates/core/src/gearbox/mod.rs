@@ -25,6 +25,7 @@ pub use description::{GearboxDescription, TextFormat};
 pub use kinematics::{Fixed, Kinematics, Stage, Topology};
 
 use crate::model::{Assembly, Wear};
+use crate::signal::tsa::ShaftTrain;
 
 /// The first paper's rig as a description (committed as `configs/gearboxes/wang2019.toml`).
 pub const PAPER_RIG: &str = include_str!("../../../../configs/gearboxes/wang2019.toml");
@@ -127,6 +128,19 @@ impl Gearbox {
     /// Exact kinematics at an input-shaft rate (Hz).
     pub fn kinematics(&self, input_hz: f64) -> Kinematics {
         self.topology.kinematics(input_hz)
+    }
+
+    /// The shafts and meshes for order analysis ([`crate::signal::tsa::order_analysis`]): the
+    /// input shaft, the stage-1 mesh order on it, and every shaft and mesh rate per unit
+    /// input-shaft rate.
+    pub fn shaft_train(&self) -> ShaftTrain {
+        let kin = self.kinematics(1.0);
+        ShaftTrain {
+            mesh_order: self.f1_hz(1.0),
+            meshes: kin.meshes.iter().map(|m| m.hz).collect(),
+            input_shaft: kin.input_shaft,
+            shafts: kin.shafts,
+        }
     }
 
     /// The reference (stage-1) mesh frequency (Hz) at an input-shaft rate (Hz).

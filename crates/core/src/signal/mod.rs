@@ -1,7 +1,9 @@
 //! Windows, amplitude spectra, simple signal statistics, and the line estimator ([`lines`]:
 //! Hann DTFT amplitudes of lines at multiples of a mesh frequency, shared by the signature
-//! table, the diagnosis and the closed loop), order tracking and angular resampling ([`order`])
-//! and the time-synchronous average with its gear condition metrics ([`tsa`]).
+//! table, the diagnosis and the closed loop), the search for a gearbox's stage-1 mesh line
+//! ([`mesh_search`]), order tracking and angular resampling ([`order`]) and the
+//! time-synchronous average with its gear condition metrics and the order analysis of every
+//! shaft of a gear train ([`tsa`]).
 //!
 //! # Conventions (read this first)
 //!
@@ -30,6 +32,7 @@
 
 pub mod features;
 pub mod lines;
+pub mod mesh_search;
 pub mod order;
 mod phasor;
 mod plan;

@@ -41,10 +41,7 @@
 //! that the resampled signal keeps every order the record holds (no aliasing); the cubic
 //! kernel attenuates content close to the original Nyquist frequency a little.
 
-use std::sync::{Arc, Mutex, OnceLock};
-
 use rustfft::num_complex::Complex64;
-use rustfft::{Fft, FftPlanner};
 use serde::{Deserialize, Serialize};
 
 use super::window::{Window, shared_window};
@@ -56,20 +53,6 @@ use crate::{Error, Result};
 pub const EDGE_REVS: f64 = 3.0;
 /// Half-width of the demodulated low-pass, in shaft orders (excludes the ±1 sidebands).
 pub const LOWPASS_ORDERS: f64 = 0.4;
-
-/// A complex FFT plan from a process-wide planner (rustfft's planner keeps the plans it made).
-pub(crate) fn complex_plan(n: usize, inverse: bool) -> Arc<dyn Fft<f64>> {
-    static PLANNER: OnceLock<Mutex<FftPlanner<f64>>> = OnceLock::new();
-    let mut p = PLANNER
-        .get_or_init(|| Mutex::new(FftPlanner::new()))
-        .lock()
-        .unwrap_or_else(|e| e.into_inner());
-    if inverse {
-        p.plan_fft_inverse(n)
-    } else {
-        p.plan_fft_forward(n)
-    }
-}
 
 /// The smallest `2^a 3^b 5^c ≥ n` (an FFT length RustFFT handles fast).
 pub(crate) fn fast_len(n: usize) -> usize {
@@ -276,6 +259,71 @@ pub fn track_mesh_phase_with(
     opts: &MeshTrackOptions,
     spectrum: Option<&Spectrum>,
 ) -> Result<ShaftAngle> {
+    check_track_inputs(x, fs, mesh_hz_hint, mesh_order, opts)?;
+    let n = x.len();
+    let fund_order = mesh_order;
+    let mean = x.iter().sum::<f64>() / n as f64;
+    let xc: Vec<f64> = x.iter().map(|v| v - mean).collect();
+
+    // Pass 1: the strongest mesh harmonic in the whole record, then its ridge.
+    let own;
+    let spec = match spectrum.filter(|s| s.amplitude.len() == n / 2 + 1) {
+        Some(s) => s,
+        None => {
+            own = amplitude_spectrum(&xc, fs, Window::Hann)?;
+            &own
+        }
+    };
+    let (fm0, harmonic) = strongest_mesh_harmonic(spec, fs, mesh_hz_hint, opts)?;
+    let mesh_order = harmonic * fund_order;
+    let shaft_a = fm0 / mesh_order;
+    let coef = coarse_mesh_frequency(&xc, fs, fm0, shaft_a, opts);
+
+    // Pass 2: demodulate, low-pass, unwrap.
+    let (phi_a, psi, step) = demodulated_phase(&xc, fs, &coef, fm0, shaft_a)?;
+    let mut revs: Vec<f64> = (0..n)
+        .map(|i| (phi_a[i] + cubic_at(&psi, i as f64 / step)) / mesh_order)
+        .collect();
+    let r0 = revs[0];
+    for r in &mut revs {
+        *r -= r0;
+    }
+    if revs.windows(2).any(|w| !(w[1] > w[0])) {
+        return Err(Error::Signal(format!(
+            "the tracked angle of the mesh line near {fm0:.1} Hz does not increase steadily \
+             (speed too irregular or line too weak to track)"
+        )));
+    }
+    let edge = (EDGE_REVS * fs / shaft_a).round() as usize;
+    let usable = (edge.min(n / 4), (n - 1).saturating_sub(edge).max(3 * n / 4));
+    let (mean_hz, var, sd, span) = speed_stats(&revs, fs, usable.0, usable.1);
+    let mesh_hz = mean_hz * fund_order;
+    Ok(ShaftAngle {
+        revs,
+        sample_rate: fs,
+        usable,
+        summary: TrackSummary {
+            method: TrackMethod::MeshPhase,
+            mean_hz,
+            speed_variation: var,
+            speed_std: sd,
+            revolutions: span,
+            mesh_hz: Some(mesh_hz),
+            mesh_order: Some(fund_order),
+            harmonic: Some(harmonic as usize),
+        },
+    })
+}
+
+/// The refusals of [`track_mesh_phase_with`]: bad samples or rate, a hint or order that is not
+/// a positive finite number, a search band above Nyquist, fewer than 16 nominal revolutions.
+fn check_track_inputs(
+    x: &[f64],
+    fs: f64,
+    mesh_hz_hint: f64,
+    mesh_order: f64,
+    opts: &MeshTrackOptions,
+) -> Result<()> {
     check_rate(fs)?;
     check_samples(x)?;
     if !(mesh_order.is_finite() && mesh_order > 0.0) {
@@ -301,7 +349,6 @@ pub fn track_mesh_phase_with(
     }
     let n = x.len();
     let shaft0 = mesh_hz_hint / mesh_order;
-    let fund_order = mesh_order;
     let min_len = (16.0 * fs / shaft0).ceil() as usize;
     if n < min_len {
         return Err(Error::Signal(format!(
@@ -309,22 +356,21 @@ pub fn track_mesh_phase_with(
              the record has {n} samples"
         )));
     }
-    let mean = x.iter().sum::<f64>() / n as f64;
-    let xc: Vec<f64> = x.iter().map(|v| v - mean).collect();
+    Ok(())
+}
 
-    // Pass 1: the strongest mesh harmonic in the whole record, then its ridge.
-    let own;
-    let spec = match spectrum.filter(|s| s.amplitude.len() == n / 2 + 1) {
-        Some(s) => s,
-        None => {
-            own = amplitude_spectrum(&xc, fs, Window::Hann)?;
-            &own
-        }
-    };
-    // Each harmonic band's strongest bin proposes a fundamental; the proposal whose multiples
-    // carry the most amplitude wins (a shaft-order sideband stronger than its mesh harmonic
-    // proposes a fundamental whose other multiples miss the mesh harmonics). Then the strongest
-    // multiple of that fundamental is tracked.
+/// Pass 1, the line to track: `(frequency in Hz, harmonic of the fundamental)`.
+///
+/// Each harmonic band's strongest bin proposes a fundamental; the proposal whose multiples
+/// carry the most amplitude wins (a shaft-order sideband stronger than its mesh harmonic
+/// proposes a fundamental whose other multiples miss the mesh harmonics). Then the strongest
+/// multiple of that fundamental is tracked.
+fn strongest_mesh_harmonic(
+    spec: &Spectrum,
+    fs: f64,
+    mesh_hz_hint: f64,
+    opts: &MeshTrackOptions,
+) -> Result<(f64, f64)> {
     let df = spec.resolution();
     let nyq = 0.5 * fs;
     let hmax = (1..=opts.harmonics.max(1))
@@ -361,10 +407,23 @@ pub fn track_mesh_phase_with(
             (fm0, harmonic, top) = (f, k as f64, a);
         }
     }
-    let mesh_order = harmonic * fund_order;
+    Ok((fm0, harmonic))
+}
+
+/// Pass 1, the ridge: the tracked line's peak in short-time spectra of `xc` (the mean-free
+/// record) within `±search` of `fm0`, and the coefficients of the polynomial in normalised time
+/// `τ ∈ [−1, 1]` fitted to them (the coarse mesh frequency `f_A`, Hz; see the
+/// [module docs](self)). `shaft_a`: the tracked shaft's rate at `fm0` (Hz).
+fn coarse_mesh_frequency(
+    xc: &[f64],
+    fs: f64,
+    fm0: f64,
+    shaft_a: f64,
+    opts: &MeshTrackOptions,
+) -> Vec<f64> {
+    let n = xc.len();
     let lo = fm0 * (1.0 - opts.search);
     let hi = fm0 * (1.0 + opts.search);
-    let shaft_a = fm0 / mesh_order;
     let seg = ((8.0 * fs / shaft_a).round() as usize).clamp(64, n);
     let hop = seg;
     // A power of two: a segment of 8 revolutions is any length (often a prime), whose FFT
@@ -400,46 +459,40 @@ pub fn track_mesh_phase_with(
             }
         }
     }
-    // φ_A(t) in cycles: ∫ f dt with t = half (τ + 1), so dt = half dτ.
-    let phase_a = |tau: f64| -> f64 {
-        let mut acc = 0.0;
-        for (k, &a) in coef.iter().enumerate() {
-            let p = (k + 1) as i32;
-            acc += a * (tau.powi(p) - (-1.0f64).powi(p)) / (k + 1) as f64;
-        }
-        half * acc
-    };
+    coef
+}
 
-    // Pass 2: demodulate, low-pass, unwrap. The FFT runs on a fast length (2^a 3^b 5^c ≥ n,
-    // zero-padded): the padding's transient falls in the discarded end revolutions.
-    let m = fast_len(n);
-    let mut buf: Vec<Complex64> = Vec::with_capacity(m);
-    // φ_A is evaluated exactly every BLOCK samples and linearly in between (the phase actually
-    // used, kept in `phi_a`, so that φ_A + ψ stays exact); the phasor steps by a constant
-    // rotation inside a block: two `sin_cos` a block instead of one a sample.
-    const BLOCK: usize = 32;
-    let mut phi_a = Vec::with_capacity(n);
-    let tau_at = |i: usize| (i as f64 / fs - half) / half;
-    let mut b0 = 0;
-    while b0 < n {
-        let b1 = (b0 + BLOCK).min(n);
-        let (p0, p1) = (phase_a(tau_at(b0)), phase_a(tau_at(b1)));
-        let dphi = (p1 - p0) / (b1 - b0) as f64;
-        let (s0, c0) = (-p0.fract() * std::f64::consts::TAU).sin_cos();
-        let (ds, dc) = (-dphi * std::f64::consts::TAU).sin_cos();
-        let (mut zc, mut zs) = (c0, s0);
-        for i in b0..b1 {
-            let v = xc[i];
-            buf.push(Complex64::new(v * zc, v * zs));
-            phi_a.push(p0 + dphi * (i - b0) as f64);
-            let c = zc * dc - zs * ds;
-            zs = zc * ds + zs * dc;
-            zc = c;
-        }
-        b0 = b1;
+/// The coarse phase `φ_A(τ)` in cycles: `∫ f_A dt` with `t = half (τ + 1)`, so `dt = half dτ`
+/// (`coef`: [`coarse_mesh_frequency`]'s polynomial, `half`: half the record's duration).
+fn coarse_phase(coef: &[f64], half: f64, tau: f64) -> f64 {
+    let mut acc = 0.0;
+    for (k, &a) in coef.iter().enumerate() {
+        let p = (k + 1) as i32;
+        acc += a * (tau.powi(p) - (-1.0f64).powi(p)) / (k + 1) as f64;
     }
-    buf.resize(m, Complex64::new(0.0, 0.0));
-    complex_plan(m, false).process(&mut buf);
+    half * acc
+}
+
+/// Pass 2: `xc` (the mean-free record) demodulated by the coarse phase, low-passed to
+/// `±LOWPASS_ORDERS` orders of `shaft_a` and unwrapped. Returns the coarse phase used at every
+/// sample (`φ_A`, cycles), the unwrapped residual phase `ψ / 2π` (cycles) on a decimated grid,
+/// and that grid's step in samples.
+///
+/// The FFT runs on a fast length (2^a 3^b 5^c ≥ n, zero-padded): the padding's transient falls
+/// in the discarded end revolutions. Errors: a line too weak to track (see
+/// [`track_mesh_phase`]).
+fn demodulated_phase(
+    xc: &[f64],
+    fs: f64,
+    coef: &[f64],
+    fm0: f64,
+    shaft_a: f64,
+) -> Result<(Vec<f64>, Vec<f64>, f64)> {
+    let n = xc.len();
+    let half = 0.5 * n as f64 / fs;
+    let m = fast_len(n);
+    let (mut buf, phi_a) = demodulate(xc, fs, coef, half, m);
+    PlanCache::global().complex(m, false).process(&mut buf);
     let bw = ((LOWPASS_ORDERS * shaft_a) * m as f64 / fs).floor() as usize;
     for (k, c) in buf.iter_mut().enumerate() {
         if k > bw && k < m - bw {
@@ -457,7 +510,7 @@ pub fn track_mesh_phase_with(
             small[l - k] = buf[m - k];
         }
     }
-    complex_plan(l, true).process(&mut small);
+    PlanCache::global().complex(l, true).process(&mut small);
     // Decimated samples that fall inside the record.
     let step = m as f64 / l as f64;
     let nd = (((n - 1) as f64 / step).floor() as usize + 2).min(l);
@@ -487,38 +540,50 @@ pub fn track_mesh_phase_with(
         prev = a;
         psi.push(unwrapped / tau);
     }
-    let mut revs: Vec<f64> = (0..n)
-        .map(|i| (phi_a[i] + cubic_at(&psi, i as f64 / step)) / mesh_order)
-        .collect();
-    let r0 = revs[0];
-    for r in &mut revs {
-        *r -= r0;
+    Ok((phi_a, psi, step))
+}
+
+/// `xc[i] e^{−i 2π φ_A(t_i)}` zero-padded to `m` points, and the `φ_A` used at every sample
+/// (cycles).
+///
+/// `φ_A` is evaluated exactly every `BLOCK` samples and linearly in between (the phase actually
+/// used, kept in `phi_a`, so that `φ_A + ψ` stays exact); the phasor steps by a constant
+/// rotation inside a block: two `sin_cos` a block instead of one a sample.
+fn demodulate(
+    xc: &[f64],
+    fs: f64,
+    coef: &[f64],
+    half: f64,
+    m: usize,
+) -> (Vec<Complex64>, Vec<f64>) {
+    let n = xc.len();
+    let mut buf: Vec<Complex64> = Vec::with_capacity(m);
+    const BLOCK: usize = 32;
+    let mut phi_a = Vec::with_capacity(n);
+    let tau_at = |i: usize| (i as f64 / fs - half) / half;
+    let mut b0 = 0;
+    while b0 < n {
+        let b1 = (b0 + BLOCK).min(n);
+        let (p0, p1) = (
+            coarse_phase(coef, half, tau_at(b0)),
+            coarse_phase(coef, half, tau_at(b1)),
+        );
+        let dphi = (p1 - p0) / (b1 - b0) as f64;
+        let (s0, c0) = (-p0.fract() * std::f64::consts::TAU).sin_cos();
+        let (ds, dc) = (-dphi * std::f64::consts::TAU).sin_cos();
+        let (mut zc, mut zs) = (c0, s0);
+        for i in b0..b1 {
+            let v = xc[i];
+            buf.push(Complex64::new(v * zc, v * zs));
+            phi_a.push(p0 + dphi * (i - b0) as f64);
+            let c = zc * dc - zs * ds;
+            zs = zc * ds + zs * dc;
+            zc = c;
+        }
+        b0 = b1;
     }
-    if revs.windows(2).any(|w| !(w[1] > w[0])) {
-        return Err(Error::Signal(format!(
-            "the tracked angle of the mesh line near {fm0:.1} Hz does not increase steadily \
-             (speed too irregular or line too weak to track)"
-        )));
-    }
-    let edge = (EDGE_REVS * fs / shaft_a).round() as usize;
-    let usable = (edge.min(n / 4), (n - 1).saturating_sub(edge).max(3 * n / 4));
-    let (mean_hz, var, sd, span) = speed_stats(&revs, fs, usable.0, usable.1);
-    let mesh_hz = mean_hz * fund_order;
-    Ok(ShaftAngle {
-        revs,
-        sample_rate: fs,
-        usable,
-        summary: TrackSummary {
-            method: TrackMethod::MeshPhase,
-            mean_hz,
-            speed_variation: var,
-            speed_std: sd,
-            revolutions: span,
-            mesh_hz: Some(mesh_hz),
-            mesh_order: Some(fund_order),
-            harmonic: Some(harmonic as usize),
-        },
-    })
+    buf.resize(m, Complex64::new(0.0, 0.0));
+    (buf, phi_a)
 }
 
 /// Shaft angle from a tachometer channel with `pulses_per_rev` pulses per revolution (see the

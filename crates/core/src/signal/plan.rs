@@ -1,12 +1,14 @@
-//! A thread-safe cache of real-to-complex FFT plans.
+//! A thread-safe cache of FFT plans (real-to-complex, complex-to-real and complex).
 
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 
 use realfft::{ComplexToReal, RealFftPlanner, RealToComplex};
+use rustfft::{Fft, FftPlanner};
 
 /// A cache of `realfft` plans (forward, and inverse for the few users that need one) keyed by
-/// transform length, shareable between threads.
+/// transform length, and of `rustfft` complex plans (the order tracker's demodulation, the TSA's
+/// order masks), shareable between threads: the one FFT plan cache of the crate.
 ///
 /// Planning an FFT (choosing the algorithm, computing twiddle factors) costs far more than one
 /// transform of a short record, so [`amplitude_spectrum`](super::amplitude_spectrum) and
@@ -22,6 +24,8 @@ struct Inner {
     planner: RealFftPlanner<f64>,
     plans: HashMap<usize, Arc<dyn RealToComplex<f64>>>,
     inverse: HashMap<usize, Arc<dyn ComplexToReal<f64>>>,
+    /// Complex plans; rustfft's planner keeps the plans it made.
+    complex: FftPlanner<f64>,
 }
 
 impl Default for PlanCache {
@@ -46,6 +50,7 @@ impl PlanCache {
                 planner: RealFftPlanner::new(),
                 plans: HashMap::new(),
                 inverse: HashMap::new(),
+                complex: FftPlanner::new(),
             }),
         }
     }
@@ -85,6 +90,18 @@ impl PlanCache {
         let p = g.planner.plan_fft_inverse(len);
         g.inverse.insert(len, Arc::clone(&p));
         p
+    }
+
+    /// The complex FFT plan for `len` points, forward (`X_k = Σ x_n e^{−2πikn/len}`) or
+    /// `inverse` (`e^{+2πikn/len}`), both unnormalised. Planned on first request, then shared;
+    /// not counted by [`PlanCache::len`] and [`PlanCache::lengths`].
+    pub fn complex(&self, len: usize, inverse: bool) -> Arc<dyn Fft<f64>> {
+        let mut g = self.lock();
+        if inverse {
+            g.complex.plan_fft_inverse(len)
+        } else {
+            g.complex.plan_fft_forward(len)
+        }
     }
 
     /// Whether an inverse plan for `len` samples is already cached.

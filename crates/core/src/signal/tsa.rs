@@ -32,12 +32,24 @@
 //!
 //! A metric whose denominator vanishes (e.g. FM4 of a pure mesh tone: its difference signal is
 //! zero to rounding) is `None`, never NaN.
+//!
+//! # Every shaft of a gear train ([`order_analysis`])
+//!
+//! The input shaft is tracked from the phase of the stage-1 mesh line
+//! ([`super::order::track_mesh_phase_with`]); every shaft of the train that turns at least
+//! [`MIN_TSA_REVS`] times in the record and carries a gear with a whole mesh order under the
+//! record's Nyquist frequency is resampled to its own revolutions, averaged and measured, and
+//! the RMS of the input shaft's TSA over that of its resampled record is the synchronous share.
+
+use std::collections::BTreeMap;
 
 use rustfft::num_complex::Complex64;
 use serde::{Deserialize, Serialize};
 
-use super::order::complex_plan;
-use super::{check_min_len, check_samples};
+use super::order::{
+    MeshTrackOptions, TrackSummary, angular_resample, samples_per_rev_for, track_mesh_phase_with,
+};
+use super::{PlanCache, Spectrum, check_min_len, check_samples};
 use crate::{Error, Result};
 
 /// Low shaft orders removed from the residual and difference signals.
@@ -114,7 +126,7 @@ pub fn tsa_signals(x: &[f64], mesh_orders: &[usize]) -> Result<TsaSignals> {
             ))
         })?;
     let mut spec: Vec<Complex64> = x.iter().map(|&v| Complex64::new(v, 0.0)).collect();
-    complex_plan(p, false).process(&mut spec);
+    PlanCache::global().complex(p, false).process(&mut spec);
     let order_amplitudes: Vec<f64> = (0..=p / 2)
         .map(|k| {
             let s = if k == 0 || 2 * k == p { 1.0 } else { 2.0 };
@@ -136,7 +148,7 @@ pub fn tsa_signals(x: &[f64], mesh_orders: &[usize]) -> Result<TsaSignals> {
                 }
             })
             .collect();
-        complex_plan(p, true).process(&mut b);
+        PlanCache::global().complex(p, true).process(&mut b);
         b.iter().map(|c| c.re / p as f64).collect()
     };
     let regular = filtered(&|k| in_mesh(k) || in_side(k));
@@ -153,7 +165,7 @@ pub fn tsa_signals(x: &[f64], mesh_orders: &[usize]) -> Result<TsaSignals> {
             }
         })
         .collect();
-    complex_plan(p, true).process(&mut b);
+    PlanCache::global().complex(p, true).process(&mut b);
     let envelope = b.iter().map(|c| c.norm() / p as f64).collect();
     Ok(TsaSignals {
         regular,
@@ -270,6 +282,177 @@ pub fn gear_metrics_and_signals(
         mesh_order: z,
     };
     Ok((metrics, s))
+}
+
+/// Fewest revolutions of a shaft for its TSA.
+pub const MIN_TSA_REVS: f64 = 8.0;
+/// Largest samples per revolution of a TSA (a slow shaft in a fast-sampled record).
+pub const MAX_SAMPLES_PER_REV: usize = 16_384;
+
+/// The TSA of one shaft.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ShaftTsa {
+    pub shaft: String,
+    /// Rate over the tracked shaft's.
+    pub rate_ratio: f64,
+    /// Mean rate (Hz).
+    pub mean_hz: f64,
+    pub samples_per_rev: usize,
+    /// Revolutions averaged.
+    pub revolutions: usize,
+    /// Tooth counts of the gears on this shaft (whole mesh orders).
+    pub mesh_orders: Vec<usize>,
+    pub metrics: GearMetrics,
+    /// Peak amplitudes (unit of the record) of the first mesh order's harmonics k = 1..3 and
+    /// their first-order sidebands: `(order, amplitude)`.
+    pub mesh_lines: Vec<(usize, f64)>,
+}
+
+/// Order tracking and the TSA of every shaft it reaches.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OrderAnalysis {
+    pub tracked_shaft: String,
+    pub tracking: TrackSummary,
+    /// RMS of the tracked shaft's TSA over the RMS of the resampled record: the synchronous
+    /// share.
+    pub sync_share: f64,
+    pub shafts: Vec<ShaftTsa>,
+    /// Shafts without a TSA and why.
+    pub skipped: Vec<(String, String)>,
+}
+
+/// The shafts and meshes of a gear train as [`order_analysis`] needs them, every rate per unit
+/// input-shaft rate (`crate::gearbox::Gearbox::shaft_train` makes it from a description).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ShaftTrain {
+    /// The input shaft: the one tracked from the stage-1 mesh line.
+    pub input_shaft: String,
+    /// Stage-1 mesh frequency over the input-shaft rate (the tooth count of the input shaft's
+    /// stage-1 gear): the tracked line's mesh order.
+    pub mesh_order: f64,
+    /// Every shaft's rate over the input shaft's (magnitudes), by name.
+    pub shafts: BTreeMap<String, f64>,
+    /// Every mesh frequency over the input-shaft rate, in stage order.
+    pub meshes: Vec<f64>,
+}
+
+/// Track the input shaft of `train` from the stage-1 mesh line near `mesh_hz_hint` (searched
+/// within `± search`, relative) and compute the TSA and its metrics for every shaft, reusing
+/// the record's whole-record Hann amplitude spectrum if at hand
+/// ([`super::order::track_mesh_phase_with`]).
+///
+/// Errors: the tracking's ([`super::order::track_mesh_phase`]); every shaft skipped is not an
+/// error.
+pub fn order_analysis(
+    x: &[f64],
+    fs: f64,
+    train: &ShaftTrain,
+    mesh_hz_hint: f64,
+    search: f64,
+    spectrum: Option<&Spectrum>,
+) -> Result<OrderAnalysis> {
+    let z_in = train.mesh_order;
+    let angle = track_mesh_phase_with(
+        x,
+        fs,
+        mesh_hz_hint,
+        z_in,
+        &MeshTrackOptions {
+            search,
+            ..Default::default()
+        },
+        spectrum,
+    )?;
+    let input = train.input_shaft.clone();
+    let usable_revs = angle.summary.revolutions;
+    let mut shafts = Vec::new();
+    let mut skipped = Vec::new();
+    let mut sync_share = f64::NAN;
+    // The input shaft first, then the others in name order.
+    let mut names: Vec<&String> = train.shafts.keys().collect();
+    names.sort_by_key(|s| (**s != input, (*s).clone()));
+    for name in names {
+        let ratio = train.shafts[name];
+        if !(ratio > 0.0) {
+            skipped.push((name.clone(), "does not turn".into()));
+            continue;
+        }
+        let revs = usable_revs * ratio;
+        if revs < MIN_TSA_REVS {
+            skipped.push((
+                name.clone(),
+                format!("{revs:.1} revolutions in the record (a TSA needs {MIN_TSA_REVS})"),
+            ));
+            continue;
+        }
+        let mut orders: Vec<usize> = train
+            .meshes
+            .iter()
+            .filter_map(|m| {
+                let o = m / ratio;
+                let r = o.round();
+                ((o - r).abs() <= 1e-6 * o && r >= 1.0).then_some(r as usize)
+            })
+            .collect();
+        orders.sort_unstable();
+        orders.dedup();
+        let mean_hz = angle.summary.mean_hz * ratio;
+        let p = samples_per_rev_for(fs, mean_hz);
+        if p > MAX_SAMPLES_PER_REV {
+            skipped.push((
+                name.clone(),
+                format!("{p} samples per revolution needed (at most {MAX_SAMPLES_PER_REV})"),
+            ));
+            continue;
+        }
+        orders.retain(|&z| z < p / 2);
+        if orders.is_empty() {
+            skipped.push((
+                name.clone(),
+                "no gear on it with a whole mesh order under the record's Nyquist frequency".into(),
+            ));
+            continue;
+        }
+        let res = angular_resample(x, &angle, ratio, p)?;
+        let avg = tsa(&res.samples, p)?;
+        let (metrics, signals) = gear_metrics_and_signals(&avg, &orders)?;
+        if *name == input {
+            let r_all = {
+                let m = res.samples.iter().sum::<f64>() / res.samples.len() as f64;
+                (res.samples.iter().map(|v| (v - m).powi(2)).sum::<f64>()
+                    / res.samples.len() as f64)
+                    .sqrt()
+            };
+            sync_share = metrics.rms / r_all;
+        }
+        let amps = signals.order_amplitudes;
+        let z = metrics.mesh_order;
+        let mut lines = Vec::new();
+        for k in 1..=3 {
+            for o in [k * z - 1, k * z, k * z + 1] {
+                if let Some(&a) = amps.get(o) {
+                    lines.push((o, a));
+                }
+            }
+        }
+        shafts.push(ShaftTsa {
+            shaft: name.clone(),
+            rate_ratio: ratio,
+            mean_hz,
+            samples_per_rev: p,
+            revolutions: res.revolutions,
+            mesh_orders: orders,
+            metrics,
+            mesh_lines: lines,
+        });
+    }
+    Ok(OrderAnalysis {
+        tracked_shaft: input,
+        tracking: angle.summary,
+        sync_share,
+        shafts,
+        skipped,
+    })
 }
 
 #[cfg(test)]
