@@ -8,6 +8,7 @@
 //!   defaults and the log of the values assumed), `gears` (geometry and inertia),
 //!   `coordinates` (the coordinates and the meshes' rows, stage by stage) and `meshes` (the
 //!   meshes' values and stiffness).
+//! - [`export`]: the resolved model with its description as a self-contained JSON document.
 //!
 //! [`Gearbox`] ties them together; [`Gearbox::paper_rig`] is the first paper's test rig
 //! (`configs/gearboxes/wang2019.toml`), which resolves to the same model as the original
@@ -17,6 +18,7 @@ mod assumed;
 pub mod build;
 mod coordinates;
 pub mod description;
+pub mod export;
 mod gears;
 pub mod kinematics;
 mod meshes;

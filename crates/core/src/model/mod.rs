@@ -11,7 +11,6 @@
 
 pub mod assembly;
 pub mod element;
-pub mod export;
 /// The original hand-written three-mesh kinematics of the first paper's rig: the reference the
 /// gearbox descriptions are tested against (not part of the library's surface).
 #[cfg(test)]
