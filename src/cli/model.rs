@@ -7,7 +7,7 @@ use anyhow::{Result, bail};
 use clap::{Args, ValueEnum};
 
 use super::common::{RigArgs, wear, write_or_print};
-use crate::model::export::ModelExport;
+use crate::gearbox::export::ModelExport;
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 pub enum ExportFormat {

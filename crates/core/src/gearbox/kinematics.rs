@@ -159,167 +159,171 @@ fn gcd(mut a: u64, mut b: u64) -> u64 {
     a
 }
 
+/// Validate stage `i` (1-based) of a description; returns the stage and its warning, if any.
 fn stage_topology(i: usize, s: &StageSpec) -> Result<(Stage, Option<String>), GearboxError> {
     match s.kind.as_str() {
-        "parallel" => {
-            const K: &str = "parallel";
-            forbid(&s.sun, i, K, "sun", "planetary")?;
-            forbid(&s.planets, i, K, "planets", "planetary")?;
-            forbid(&s.ring, i, K, "ring", "planetary")?;
-            forbid(&s.carrier, i, K, "carrier", "planetary")?;
-            forbid(&s.fixed, i, K, "fixed", "planetary")?;
-            if !s.ring_mesh.is_empty() {
-                return Err(GearboxError::ForeignMember {
-                    stage: i,
-                    kind: K,
-                    member: "ring_mesh",
-                    other: "planetary",
-                });
-            }
-            let p = require(
-                &s.pinion,
-                i,
-                K,
-                "pinion",
-                "write pinion = { shaft = \"…\", teeth = … }",
-            )?;
-            let g = require(
-                &s.gear,
-                i,
-                K,
-                "gear",
-                "write gear = { shaft = \"…\", teeth = … }",
-            )?;
-            let pz = teeth(i, "pinion", p.teeth)?;
-            let gz = teeth(i, "gear", g.teeth)?;
-            let ps = shaft_of(i, "pinion", p)?;
-            let gs = shaft_of(i, "gear", g)?;
-            if ps == gs {
-                return Err(GearboxError::SameShaft {
-                    stage: i,
-                    shaft: ps,
-                });
-            }
-            Ok((
-                Stage::Parallel {
-                    pinion_shaft: ps,
-                    pinion_teeth: pz,
-                    gear_shaft: gs,
-                    gear_teeth: gz,
-                },
-                None,
-            ))
-        }
-        "planetary" => {
-            const K: &str = "planetary";
-            forbid(&s.pinion, i, K, "pinion", "parallel")?;
-            forbid(&s.gear, i, K, "gear", "parallel")?;
-            let sun = require(
-                &s.sun,
-                i,
-                K,
-                "sun",
-                "write sun = { shaft = \"…\", teeth = … }",
-            )?;
-            let pl = require(
-                &s.planets,
-                i,
-                K,
-                "planets",
-                "write planets = { count = …, teeth = … }",
-            )?;
-            let ring = require(&s.ring, i, K, "ring", "write ring = { teeth = … }")?;
-            let fixed = match s.fixed.as_deref() {
-                Some("ring") => Fixed::Ring,
-                Some("carrier") => Fixed::Carrier,
-                Some("sun") => Fixed::Sun,
-                Some(other) => {
-                    return Err(GearboxError::Fixed {
-                        stage: i,
-                        found: format!("\"{other}\""),
-                    });
-                }
-                None => {
-                    return Err(GearboxError::Fixed {
-                        stage: i,
-                        found: "missing".into(),
-                    });
-                }
-            };
-            let zs = teeth(i, "sun", sun.teeth)?;
-            let zp = teeth(i, "planet", pl.teeth)?;
-            let zr = teeth(i, "ring", ring.teeth)?;
-            if pl.count < 1 || pl.count > MAX_PLANETS as i64 {
-                return Err(GearboxError::PlanetCount {
-                    stage: i,
-                    count: pl.count,
-                    max: MAX_PLANETS,
-                });
-            }
-            let n = pl.count as u32;
-            if !s.profile_shifted && ring.teeth != sun.teeth + 2 * pl.teeth {
-                return Err(GearboxError::Coaxial {
-                    stage: i,
-                    ring: ring.teeth,
-                    sun: sun.teeth,
-                    planet: pl.teeth,
-                    expected: sun.teeth + 2 * pl.teeth,
-                });
-            }
-            let carrier_shaft = s.carrier.as_ref().and_then(|c| c.shaft.clone());
-            let member_shaft =
-                |name: &'static str, v: Option<String>, is_fixed: bool| match (is_fixed, v) {
-                    (true, Some(shaft)) => Err(GearboxError::FixedOnShaft {
-                        stage: i,
-                        member: name,
-                        shaft,
-                    }),
-                    (true, None) => Ok(None),
-                    (false, Some(s)) if !s.trim().is_empty() => Ok(Some(s)),
-                    (false, _) => Err(GearboxError::NoShaft {
-                        stage: i,
-                        member: name.into(),
-                    }),
-                };
-            let sun_shaft = member_shaft("sun", sun.shaft.clone(), fixed == Fixed::Sun)?;
-            let ring_shaft = member_shaft("ring", ring.shaft.clone(), fixed == Fixed::Ring)?;
-            let carrier_shaft = member_shaft("carrier", carrier_shaft, fixed == Fixed::Carrier)?;
-            let rotating: Vec<&String> = [&sun_shaft, &ring_shaft, &carrier_shaft]
-                .into_iter()
-                .flatten()
-                .collect();
-            if rotating.len() == 2 && rotating[0] == rotating[1] {
-                return Err(GearboxError::SameShaft {
-                    stage: i,
-                    shaft: rotating[0].clone(),
-                });
-            }
-            let warning = ((zs + zr) % n != 0).then(|| {
-                format!(
-                    "stage {i}: (sun {zs} + ring {zr}) / {n} planets is not an integer, so the \
-                     planets cannot be equally spaced; the model spaces them equally and meshes \
-                     them in phase anyway"
-                )
-            });
-            Ok((
-                Stage::Planetary {
-                    sun_shaft,
-                    sun_teeth: zs,
-                    planet_teeth: zp,
-                    planets: n,
-                    ring_shaft,
-                    ring_teeth: zr,
-                    carrier_shaft,
-                    fixed,
-                },
-                warning,
-            ))
-        }
+        "parallel" => parallel_topology(i, s).map(|st| (st, None)),
+        "planetary" => planetary_topology(i, s),
         other => Err(GearboxError::UnknownKind {
             stage: i,
             kind: other.into(),
         }),
     }
+}
+
+/// Parallel stage `i`: a pinion and a gear on two different shafts, no planetary member.
+fn parallel_topology(i: usize, s: &StageSpec) -> Result<Stage, GearboxError> {
+    const K: &str = "parallel";
+    forbid(&s.sun, i, K, "sun", "planetary")?;
+    forbid(&s.planets, i, K, "planets", "planetary")?;
+    forbid(&s.ring, i, K, "ring", "planetary")?;
+    forbid(&s.carrier, i, K, "carrier", "planetary")?;
+    forbid(&s.fixed, i, K, "fixed", "planetary")?;
+    if !s.ring_mesh.is_empty() {
+        return Err(GearboxError::ForeignMember {
+            stage: i,
+            kind: K,
+            member: "ring_mesh",
+            other: "planetary",
+        });
+    }
+    let p = require(
+        &s.pinion,
+        i,
+        K,
+        "pinion",
+        "write pinion = { shaft = \"…\", teeth = … }",
+    )?;
+    let g = require(
+        &s.gear,
+        i,
+        K,
+        "gear",
+        "write gear = { shaft = \"…\", teeth = … }",
+    )?;
+    let pz = teeth(i, "pinion", p.teeth)?;
+    let gz = teeth(i, "gear", g.teeth)?;
+    let ps = shaft_of(i, "pinion", p)?;
+    let gs = shaft_of(i, "gear", g)?;
+    if ps == gs {
+        return Err(GearboxError::SameShaft {
+            stage: i,
+            shaft: ps,
+        });
+    }
+    Ok(Stage::Parallel {
+        pinion_shaft: ps,
+        pinion_teeth: pz,
+        gear_shaft: gs,
+        gear_teeth: gz,
+    })
+}
+
+/// Planetary stage `i`: sun, planets, ring and carrier, one of them fixed, coaxial unless
+/// profile-shifted; with the equal-spacing warning when the planets cannot be equally spaced.
+fn planetary_topology(i: usize, s: &StageSpec) -> Result<(Stage, Option<String>), GearboxError> {
+    const K: &str = "planetary";
+    forbid(&s.pinion, i, K, "pinion", "parallel")?;
+    forbid(&s.gear, i, K, "gear", "parallel")?;
+    let sun = require(
+        &s.sun,
+        i,
+        K,
+        "sun",
+        "write sun = { shaft = \"…\", teeth = … }",
+    )?;
+    let pl = require(
+        &s.planets,
+        i,
+        K,
+        "planets",
+        "write planets = { count = …, teeth = … }",
+    )?;
+    let ring = require(&s.ring, i, K, "ring", "write ring = { teeth = … }")?;
+    let fixed = match s.fixed.as_deref() {
+        Some("ring") => Fixed::Ring,
+        Some("carrier") => Fixed::Carrier,
+        Some("sun") => Fixed::Sun,
+        Some(other) => {
+            return Err(GearboxError::Fixed {
+                stage: i,
+                found: format!("\"{other}\""),
+            });
+        }
+        None => {
+            return Err(GearboxError::Fixed {
+                stage: i,
+                found: "missing".into(),
+            });
+        }
+    };
+    let zs = teeth(i, "sun", sun.teeth)?;
+    let zp = teeth(i, "planet", pl.teeth)?;
+    let zr = teeth(i, "ring", ring.teeth)?;
+    if pl.count < 1 || pl.count > MAX_PLANETS as i64 {
+        return Err(GearboxError::PlanetCount {
+            stage: i,
+            count: pl.count,
+            max: MAX_PLANETS,
+        });
+    }
+    let n = pl.count as u32;
+    if !s.profile_shifted && ring.teeth != sun.teeth + 2 * pl.teeth {
+        return Err(GearboxError::Coaxial {
+            stage: i,
+            ring: ring.teeth,
+            sun: sun.teeth,
+            planet: pl.teeth,
+            expected: sun.teeth + 2 * pl.teeth,
+        });
+    }
+    let carrier_shaft = s.carrier.as_ref().and_then(|c| c.shaft.clone());
+    let member_shaft = |name: &'static str, v: Option<String>, is_fixed: bool| match (is_fixed, v) {
+        (true, Some(shaft)) => Err(GearboxError::FixedOnShaft {
+            stage: i,
+            member: name,
+            shaft,
+        }),
+        (true, None) => Ok(None),
+        (false, Some(s)) if !s.trim().is_empty() => Ok(Some(s)),
+        (false, _) => Err(GearboxError::NoShaft {
+            stage: i,
+            member: name.into(),
+        }),
+    };
+    let sun_shaft = member_shaft("sun", sun.shaft.clone(), fixed == Fixed::Sun)?;
+    let ring_shaft = member_shaft("ring", ring.shaft.clone(), fixed == Fixed::Ring)?;
+    let carrier_shaft = member_shaft("carrier", carrier_shaft, fixed == Fixed::Carrier)?;
+    let rotating: Vec<&String> = [&sun_shaft, &ring_shaft, &carrier_shaft]
+        .into_iter()
+        .flatten()
+        .collect();
+    if rotating.len() == 2 && rotating[0] == rotating[1] {
+        return Err(GearboxError::SameShaft {
+            stage: i,
+            shaft: rotating[0].clone(),
+        });
+    }
+    let warning = ((zs + zr) % n != 0).then(|| {
+        format!(
+            "stage {i}: (sun {zs} + ring {zr}) / {n} planets is not an integer, so the \
+             planets cannot be equally spaced; the model spaces them equally and meshes \
+             them in phase anyway"
+        )
+    });
+    Ok((
+        Stage::Planetary {
+            sun_shaft,
+            sun_teeth: zs,
+            planet_teeth: zp,
+            planets: n,
+            ring_shaft,
+            ring_teeth: zr,
+            carrier_shaft,
+            fixed,
+        },
+        warning,
+    ))
 }
 
 impl Topology {

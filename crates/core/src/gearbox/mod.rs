@@ -4,15 +4,24 @@
 //! - [`description`]: the file format (`gearwear-gearbox`, version 1, TOML or JSON).
 //! - [`kinematics`]: the validated topology, every shaft rate and mesh frequency.
 //! - [`build`]: physical values (given or defaulted and listed as assumed) and the generic
-//!   [`Assembly`](crate::model::Assembly) for a wear degree.
+//!   [`Assembly`](crate::model::Assembly) for a wear degree, from its parts: `assumed` (the
+//!   defaults and the log of the values assumed), `gears` (geometry and inertia),
+//!   `coordinates` (the coordinates and the meshes' rows, stage by stage) and `meshes` (the
+//!   meshes' values and stiffness).
+//! - [`export`]: the resolved model with its description as a self-contained JSON document.
 //!
 //! [`Gearbox`] ties them together; [`Gearbox::paper_rig`] is the first paper's test rig
 //! (`configs/gearboxes/wang2019.toml`), which resolves to the same model as the original
 //! hand-written configuration (tested to 1e-12).
 
+mod assumed;
 pub mod build;
+mod coordinates;
 pub mod description;
+pub mod export;
+mod gears;
 pub mod kinematics;
+mod meshes;
 
 use std::path::Path;
 

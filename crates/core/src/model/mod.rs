@@ -5,22 +5,15 @@
 //!   its dimensionless version.
 //! - [`system`]: the resolved [`DimensionlessModel`] and its right-hand side [`GearOde`].
 //! - [`wear`]: the wear state a model is built for.
-//! - Any gearbox, the first seed's rig included, is described and built in [`crate::gearbox`].
+//! - Any gearbox, the first seed's rig included, is described and built in [`crate::gearbox`]
+//!   (the original hand-written Model A configuration is a test oracle in
+//!   `crates/core/tests/support/`).
 //! - [`rig_b`]: the second seed's 10-DOF space drive (Model B) as a configuration.
 //! - [`reconstruct`]: physical angles, speeds and accelerations from the relative form.
 
 pub mod assembly;
 pub mod element;
-pub mod export;
-/// The original hand-written three-mesh kinematics of the first paper's rig: the reference the
-/// gearbox descriptions are tested against (not part of the library's surface).
-#[cfg(test)]
-pub(crate) mod kinematics;
 pub mod reconstruct;
-/// The original hand-written Model A configuration (`configs/model_a.toml`): the reference that
-/// `configs/gearboxes/wang2019.toml` must resolve to (not part of the library's surface).
-#[cfg(test)]
-pub(crate) mod rig_a;
 pub mod rig_b;
 pub mod system;
 pub mod wear;
@@ -29,11 +22,7 @@ pub use assembly::Assembly;
 pub use element::{
     Damping, Dof, DofKind, Element, Harmonic, Load, LoadSchedule, StiffnessShape, ToothDamage,
 };
-#[cfg(test)]
-pub(crate) use kinematics::Frequencies;
 pub use reconstruct::{Reconstructor, static_state};
-#[cfg(test)]
-pub(crate) use rig_a::ModelAConfig;
 pub use rig_b::{LoadCase, ModelBConfig, ModelBOptions, StiffnessForm};
 pub use system::{DimensionlessModel, GearOde, dead_zone};
 pub use wear::Wear;

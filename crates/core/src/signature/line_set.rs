@@ -100,19 +100,6 @@ pub fn gearbox_line_set(gb: &crate::gearbox::Gearbox) -> Vec<LineDef> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gearbox::Gearbox;
-
-    #[test]
-    fn paper_rig_gets_the_original_fourteen_lines() {
-        let gb = Gearbox::paper_rig();
-        let new = gearbox_line_set(&gb);
-        let old = super::super::legacy_line_set(
-            &crate::model::ModelAConfig::default_rig()
-                .tooth_counts()
-                .frequencies(),
-        );
-        assert_eq!(new, old);
-    }
 
     fn names(r2: f64, wears: bool) -> Vec<LineDef> {
         kinematic_line_set(&[

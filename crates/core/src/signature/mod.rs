@@ -31,8 +31,6 @@ use std::f64::consts::TAU;
 
 use serde::{Deserialize, Serialize};
 
-#[cfg(test)]
-use crate::model::Frequencies;
 use crate::signal::lines::LineMeasurement;
 
 pub use table::{SignatureTable, SimulationSettings, model_hash};
@@ -71,39 +69,6 @@ pub struct LineDef {
     /// True for lines of the planetary stage (f3 and its sidebands): they are kept out of the
     /// wear likelihood and drive the planetary-clearance flag instead.
     pub planetary: bool,
-}
-
-/// The original hand-written line set of the first paper's rig (kept as the reference that
-/// [`line_set::gearbox_line_set`] must reproduce for that rig): the mesh frequencies, their
-/// harmonics and combination tones, and the subharmonics of period-2 motion. Lines closer than 4
-/// resolution bins (`4 / SEGMENT_PERIODS` f1) to another are left out (e.g. `3f2 = 1.08` next
-/// to `f1 + f3 = 1.0875`; `f2 + f3 = 0.4475` next to `f1/2`).
-#[cfg(test)]
-pub(crate) fn legacy_line_set(fr: &Frequencies) -> Vec<LineDef> {
-    let (f2, f3) = (fr.f2, fr.f3);
-    let l = |name: &str, ratio: f64, planetary: bool| LineDef {
-        name: name.into(),
-        ratio,
-        planetary,
-    };
-    let mut v = vec![
-        l("f3", f3, true),
-        l("2f3", 2.0 * f3, true),
-        l("f1-2f2", 1.0 - 2.0 * f2, false),
-        l("f2", f2, false),
-        l("f1/2", 0.5, false),
-        l("f1-f2", 1.0 - f2, false),
-        l("2f2", 2.0 * f2, false),
-        l("f1-f3", 1.0 - f3, true),
-        l("f1", 1.0, false),
-        l("f1+f3", 1.0 + f3, true),
-        l("f1+f2", 1.0 + f2, false),
-        l("3f1/2", 1.5, false),
-        l("2f1-f2", 2.0 - f2, false),
-        l("2f1", 2.0, false),
-    ];
-    v.sort_by(|a, b| a.ratio.total_cmp(&b.ratio));
-    v
 }
 
 /// The ratios of a line set, in its order (what
@@ -196,46 +161,4 @@ pub fn mix_seed(parts: &[u64]) -> u64 {
         s = g.next_u64();
     }
     s
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::model::ModelAConfig;
-    use crate::signal::lines::measure_lines;
-
-    #[test]
-    fn measures_known_lines_gain_invariantly() {
-        let fr = ModelAConfig::default_rig().tooth_counts().frequencies();
-        let lines = line_set::gearbox_line_set(&crate::gearbox::Gearbox::paper_rig());
-        let (fs, f1) = (25_600.0, 870.0);
-        let n = 25_600;
-        let sig = |gain: f64| -> Vec<f64> {
-            (0..n)
-                .map(|i| {
-                    let t = i as f64 / fs;
-                    gain * (2.0 * (TAU * f1 * t).sin()
-                        + 0.5 * (TAU * fr.f2 * f1 * t + 0.3).sin()
-                        + 0.1 * (TAU * 2.0 * f1 * t).cos()
-                        + 7.0)
-                })
-                .collect()
-        };
-        let m = measure_lines(&sig(1.0), fs, f1, &line_ratios(&lines)).unwrap();
-        let a = |name: &str| m.amplitudes[LineMeasurement::index(&lines, name).unwrap()];
-        assert!((a("f1") - 2.0).abs() < 1e-3, "{}", a("f1"));
-        assert!((a("f2") - 0.5).abs() < 1e-3);
-        assert!((a("2f1") - 0.1).abs() < 1e-3);
-        assert!(a("f1/2") < 1e-3);
-        // Band power: (2² + 0.5² + 0.1²)/2.
-        assert!((m.band_power - (4.0 + 0.25 + 0.01) / 2.0).abs() < 0.01 * m.band_power);
-        let f = m.features(&lines);
-        let g = measure_lines(&sig(37.0), fs, f1, &line_ratios(&lines))
-            .unwrap()
-            .features(&lines);
-        for (x, y) in f.iter().zip(&g) {
-            assert!((x - y).abs() < 1e-9);
-        }
-        assert_eq!(f.len(), feature_names(&lines).len());
-    }
 }

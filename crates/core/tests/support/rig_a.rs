@@ -12,16 +12,21 @@
 //!
 //! Wear is the fixed-axis composite-error amplitude `ea` (units of `b_ref`, the paper's
 //! convention): `e1 = ea sin(Ω1 τ)`, `e2 = ea sin(Ω2 τ)`.
+//!
+//! The original hand-written configuration, kept as the test oracle that
+//! `configs/gearboxes/wang2019.toml` must resolve to (included by `tests/paper_rig.rs` with
+//! `#[path]`; it needs `kinematics_a` beside it as a sibling module).
 
+use gearwear_core::error::{Error, Result};
+use gearwear_core::model::{
+    Assembly, Damping, Dof, Element, Load, LoadSchedule, StiffnessShape, Wear,
+};
 use serde::{Deserialize, Serialize};
 
-use super::assembly::Assembly;
-use super::element::{Damping, Dof, Element, Load, LoadSchedule, StiffnessShape};
-use super::kinematics::ToothCounts;
-use super::wear::Wear;
-use crate::error::{Error, Result};
+use super::kinematics_a::ToothCounts;
 
-/// The committed default configuration (`configs/model_a.toml`).
+/// The committed default configuration (`configs/model_a.toml`, four levels up from
+/// `crates/core/tests/support/`).
 pub const DEFAULT_CONFIG: &str = include_str!("../../../../configs/model_a.toml");
 
 /// One gear of Table 1.

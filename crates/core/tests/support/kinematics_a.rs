@@ -3,10 +3,13 @@
 //! Stage 1: `f1 = z1 n1`; stage 2: `f2 = z3 nB` with `nB = n1 z1/z2`; planetary stage with the
 //! ring fixed and the sun driven at `nC = nB z3/z4`: carrier `nc = nC zs/(zs + zr)`, mesh
 //! `f3 = zs (nC − nc)` (the paper's Table 2: f2/f1 = 0.3599 ≈ 0.36, f3/f1 = 0.0877 ≈ 0.0875).
+//!
+//! The original hand-written three-mesh kinematics of the first paper's rig, kept as the test
+//! oracle the gearbox descriptions are checked against (included by `tests/paper_rig.rs` with
+//! `#[path]`).
 
+use gearwear_core::error::{Error, Result};
 use serde::Serialize;
-
-use crate::error::{Error, Result};
 
 /// Most planets a configuration may have. Real planetary stages carry 3 to 8; each planet
 /// adds a coordinate and two meshes to the model, so an unchecked count (a config file may say

@@ -1,11 +1,10 @@
-//! The resolved dimensionless model as a self-contained JSON document, so that anyone can
-//! re-integrate it independently (`gearwear model --export json`).
+//! A gearbox's resolved dimensionless model as a self-contained JSON document, so that anyone
+//! can re-integrate it independently (`gearwear model --export json`).
 
 use serde::Serialize;
 
-use super::element::StiffnessShape;
-use super::system::DimensionlessModel;
-use crate::gearbox::{AssumedValue, Gearbox, GearboxDescription};
+use super::{AssumedValue, Gearbox, GearboxDescription};
+use crate::model::{DimensionlessModel, StiffnessShape};
 
 /// Export format (version 1). Vectors follow `order`.
 #[derive(Debug, Clone, Serialize)]
