@@ -1,0 +1,312 @@
+//! The record path's writes: an accepted record, its diagnosis, its webhook deliveries and
+//! the idempotent answer, in one transaction (or several records in one group commit).
+
+use async_trait::async_trait;
+
+use super::StoreResult;
+use super::diagnoses::{DiagnosisRow, level_rank, novelty_json, wear_json};
+
+/// An accepted record's metadata, features and (optionally) raw samples.
+#[derive(Debug, Clone)]
+pub struct NewRecord {
+    pub id: String,
+    pub machine_id: String,
+    pub received_at: i64,
+    pub recorded_at: Option<String>,
+    pub sensor: Option<String>,
+    pub content_type: String,
+    pub sample_rate_hz: f64,
+    pub shaft_hz: Option<f64>,
+    pub sample_count: i64,
+    pub sha256: String,
+    /// JSON: lines and condition indicators.
+    pub features: String,
+    /// Little-endian f32 samples, `None` when retention is zero (several channels: one after
+    /// another, in the order of `channels`).
+    pub samples: Option<Vec<u8>>,
+    /// Marked healthy: part of the machine's baseline.
+    pub baseline: bool,
+    /// Channel names of a multichannel record.
+    pub channels: Option<Vec<String>>,
+}
+
+/// The stored response to an `Idempotency-Key`.
+#[derive(Debug, Clone)]
+pub struct IdemRow {
+    pub key_id: String,
+    pub idem_key: String,
+    /// SHA-256 of the request (machine, content type, query, body).
+    pub request_hash: String,
+    pub status: i64,
+    pub response: String,
+}
+
+/// Everything one accepted record writes, in one transaction.
+#[derive(Debug, Clone)]
+pub struct Ingest {
+    pub record: NewRecord,
+    pub diagnosis: DiagnosisRow,
+    pub idempotency: Option<IdemRow>,
+}
+
+/// The webhook events an ingest raises, given the machine's previous alert level:
+/// `diagnosis.created` always, `wear.threshold_crossed` when the level rises to warning or
+/// alarm. Payloads are JSON texts.
+pub fn ingest_events(prev_level: &str, ing: &Ingest, event_id: &str) -> Vec<(String, String)> {
+    let d = &ing.diagnosis;
+    let base = serde_json::json!({
+        "event_id": event_id,
+        "machine_id": d.machine_id,
+        "diagnosis_id": d.id,
+        "record_id": d.record_id,
+        "created_at": crate::time::rfc3339(d.created_at),
+        "wear_degree": wear_json(d),
+        "alert_level": d.alert_level,
+        "motion_state": d.motion_state,
+        "novelty": novelty_json(d),
+        "channel": d.channel,
+    });
+    let mut out = Vec::new();
+    let mut created = base.clone();
+    created["event"] = "diagnosis.created".into();
+    out.push(("diagnosis.created".to_string(), created.to_string()));
+    if level_rank(&d.alert_level) > level_rank(prev_level) && level_rank(&d.alert_level) >= 2 {
+        let mut crossed = base;
+        crossed["event"] = "wear.threshold_crossed".into();
+        crossed["previous_alert_level"] = prev_level.into();
+        out.push(("wear.threshold_crossed".to_string(), crossed.to_string()));
+    }
+    out
+}
+
+/// Accepted records and the answers to idempotency keys.
+#[async_trait]
+pub trait IngestStore: Send + Sync {
+    async fn get_idempotent(&self, key_id: &str, idem_key: &str) -> StoreResult<Option<IdemRow>>;
+    /// Write an accepted record in one transaction. `StoreError::Conflict` when the
+    /// idempotency key was stored meanwhile by a concurrent request.
+    async fn ingest(&self, ing: &Ingest) -> StoreResult<()>;
+    /// Write several accepted records in ONE transaction (one commit, one fsync — group
+    /// commit), each in its own savepoint: the result of each, in order. When the commit
+    /// fails, every record gets that error and none is stored.
+    async fn ingest_batch(&self, ings: &[Ingest]) -> Vec<StoreResult<()>>;
+}
+
+/// The SQL of [`IngestStore`] for one backend: `$store` is the store type, `$db` its
+/// sqlx database; invoked in a module of its own inside the backend's module. Both backends
+/// run the same text.
+macro_rules! ingest_sql {
+    ($store:ident, $db:ty) => {
+        use super::webhooks::webhook_row;
+        use super::$store;
+        use sqlx::Row;
+        use $crate::store::*;
+
+        /// Every write of one accepted record, inside the caller's transaction.
+        async fn ingest_in(tx: &mut sqlx::Transaction<'_, $db>, ing: &Ingest) -> StoreResult<()> {
+            let (rec, d) = (&ing.record, &ing.diagnosis);
+            // A write first: SQLite then takes its write lock at once (waiting on the busy
+            // timeout) instead of failing to upgrade a read lock later. The same statement
+            // hands back the machine's alert level before this record (the no-op update
+            // returns the stored row; a new machine's is the column default): one round trip
+            // instead of an insert and a select, and on PostgreSQL the row stays locked
+            // until the commit, so a concurrent record cannot read the same previous level.
+            let prev: String = sqlx::query(
+                "INSERT INTO machines (id, created_at, updated_at) VALUES ($1, $2, $2) \
+                 ON CONFLICT (id) DO UPDATE SET updated_at = machines.updated_at \
+                 RETURNING alert_level",
+            )
+            .bind(&rec.machine_id)
+            .bind(rec.received_at)
+            .fetch_one(&mut **tx)
+            .await?
+            .try_get("alert_level")?;
+            if let Some(i) = &ing.idempotency {
+                let r = sqlx::query(
+                    "INSERT INTO idempotency_keys \
+                     (key_id, idem_key, request_hash, status, response, created_at) \
+                     VALUES ($1, $2, $3, $4, $5, $6)",
+                )
+                .bind(&i.key_id)
+                .bind(&i.idem_key)
+                .bind(&i.request_hash)
+                .bind(i.status)
+                .bind(&i.response)
+                .bind(rec.received_at)
+                .execute(&mut **tx)
+                .await;
+                if let Err(e) = r {
+                    return Err(if is_unique_violation(&e) {
+                        StoreError::Conflict("idempotency key".into())
+                    } else {
+                        e.into()
+                    });
+                }
+            }
+            sqlx::query(
+                "INSERT INTO records (id, machine_id, received_at, recorded_at, sensor, \
+                 content_type, sample_rate_hz, shaft_hz, sample_count, sha256, features, \
+                 samples, baseline, baseline_at, channels) \
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15)",
+            )
+            .bind(&rec.id)
+            .bind(&rec.machine_id)
+            .bind(rec.received_at)
+            .bind(&rec.recorded_at)
+            .bind(&rec.sensor)
+            .bind(&rec.content_type)
+            .bind(rec.sample_rate_hz)
+            .bind(rec.shaft_hz)
+            .bind(rec.sample_count)
+            .bind(&rec.sha256)
+            .bind(&rec.features)
+            .bind(&rec.samples)
+            .bind(rec.baseline as i64)
+            .bind(rec.baseline.then_some(rec.received_at))
+            .bind(
+                rec.channels
+                    .as_ref()
+                    .map(|c| serde_json::to_string(c).unwrap_or_default()),
+            )
+            .execute(&mut **tx)
+            .await?;
+            sqlx::query(
+                "INSERT INTO diagnoses (id, record_id, machine_id, created_at, ea_estimate, \
+                 ea_lower, ea_upper, alert_level, motion_state, body, spectrum, has_wear, \
+                 novelty_score, novelty_threshold, channel) \
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15)",
+            )
+            .bind(&d.id)
+            .bind(&d.record_id)
+            .bind(&d.machine_id)
+            .bind(d.created_at)
+            .bind(d.ea_estimate)
+            .bind(d.ea_lower)
+            .bind(d.ea_upper)
+            .bind(&d.alert_level)
+            .bind(&d.motion_state)
+            .bind(&d.body)
+            .bind(&d.spectrum)
+            .bind(d.has_wear as i64)
+            .bind(d.novelty_score)
+            .bind(d.novelty_threshold)
+            .bind(&d.channel)
+            .execute(&mut **tx)
+            .await?;
+            sqlx::query(
+                "UPDATE machines SET updated_at = $2, record_count = record_count + 1, \
+                 last_diagnosis_id = $3, alert_level = $4 WHERE id = $1",
+            )
+            .bind(&rec.machine_id)
+            .bind(rec.received_at)
+            .bind(&d.id)
+            .bind(&d.alert_level)
+            .execute(&mut **tx)
+            .await?;
+            let hooks = sqlx::query("SELECT * FROM webhooks WHERE deleted_at IS NULL")
+                .fetch_all(&mut **tx)
+                .await?;
+            let event_id = new_id();
+            let events = ingest_events(&prev, ing, &event_id);
+            for h in &hooks {
+                let h = webhook_row(h)?;
+                for (event, payload) in &events {
+                    if !h.events.iter().any(|e| e == event || e == "*") {
+                        continue;
+                    }
+                    sqlx::query(
+                        "INSERT INTO deliveries (id, webhook_id, event, payload, status, \
+                         attempts, next_attempt_at, created_at) \
+                         VALUES ($1, $2, $3, $4, 'pending', 0, $5, $5)",
+                    )
+                    .bind(new_id())
+                    .bind(&h.id)
+                    .bind(event)
+                    .bind(payload)
+                    .bind(rec.received_at)
+                    .execute(&mut **tx)
+                    .await?;
+                }
+            }
+            Ok(())
+        }
+
+        #[async_trait::async_trait]
+        impl $crate::store::IngestStore for $store {
+            async fn get_idempotent(
+                &self,
+                key_id: &str,
+                idem_key: &str,
+            ) -> StoreResult<Option<IdemRow>> {
+                let r = sqlx::query(
+                    "SELECT * FROM idempotency_keys WHERE key_id = $1 AND idem_key = $2",
+                )
+                .bind(key_id)
+                .bind(idem_key)
+                .fetch_optional(&self.pool)
+                .await?;
+                r.map(|r| -> StoreResult<IdemRow> {
+                    Ok(IdemRow {
+                        key_id: r.try_get("key_id")?,
+                        idem_key: r.try_get("idem_key")?,
+                        request_hash: r.try_get("request_hash")?,
+                        status: r.try_get("status")?,
+                        response: r.try_get("response")?,
+                    })
+                })
+                .transpose()
+            }
+
+            async fn ingest(&self, ing: &Ingest) -> StoreResult<()> {
+                let mut tx = self.pool.begin().await?;
+                ingest_in(&mut tx, ing).await?;
+                tx.commit().await.map_err(|e| {
+                    if is_unique_violation(&e) {
+                        StoreError::Conflict("idempotency key".into())
+                    } else {
+                        e.into()
+                    }
+                })?;
+                Ok(())
+            }
+
+            async fn ingest_batch(&self, ings: &[Ingest]) -> Vec<StoreResult<()>> {
+                if ings.len() == 1 {
+                    return vec![self.ingest(&ings[0]).await];
+                }
+                let mut tx = match self.pool.begin().await {
+                    Ok(tx) => tx,
+                    Err(e) => {
+                        let e = Arc::new(StoreError::from(e));
+                        return ings
+                            .iter()
+                            .map(|_| Err(StoreError::Shared(e.clone())))
+                            .collect();
+                    }
+                };
+                let mut out = Vec::with_capacity(ings.len());
+                for ing in ings {
+                    // Each record in its own savepoint: one that fails (a duplicate idempotency
+                    // key) is rolled back alone and answered with its own error.
+                    let r = async {
+                        let mut sp = sqlx::Acquire::begin(&mut *tx).await?;
+                        ingest_in(&mut sp, ing).await?;
+                        sp.commit().await?;
+                        Ok::<(), StoreError>(())
+                    }
+                    .await;
+                    out.push(r);
+                }
+                if let Err(e) = tx.commit().await {
+                    let e = Arc::new(StoreError::from(e));
+                    return ings
+                        .iter()
+                        .map(|_| Err(StoreError::Shared(e.clone())))
+                        .collect();
+                }
+                out
+            }
+        }
+    };
+}
+pub(crate) use ingest_sql;
