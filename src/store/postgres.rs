@@ -22,4 +22,47 @@ impl PgStore {
     }
 }
 
-super::impl_store!(PgStore, sqlx::Postgres, "postgres");
+#[async_trait::async_trait]
+impl super::Store for PgStore {
+    fn kind(&self) -> &'static str {
+        "postgres"
+    }
+
+    async fn ping(&self) -> super::StoreResult<()> {
+        sqlx::query("SELECT 1").execute(&self.pool).await?;
+        Ok(())
+    }
+
+    async fn close(&self) {
+        self.pool.close().await;
+    }
+}
+
+// The SQL of each resource on this backend, one module each.
+mod keys {
+    crate::store::keys::keys_sql!(PgStore, sqlx::Postgres);
+}
+mod ingest {
+    crate::store::ingest::ingest_sql!(PgStore, sqlx::Postgres, one_query: false);
+}
+mod diagnoses {
+    crate::store::diagnoses::diagnoses_sql!(PgStore, sqlx::Postgres);
+}
+mod machines {
+    crate::store::machines::machines_sql!(PgStore, sqlx::Postgres);
+}
+mod webhooks {
+    crate::store::webhooks::webhooks_sql!(PgStore, sqlx::Postgres);
+}
+mod retention {
+    crate::store::retention::retention_sql!(PgStore, sqlx::Postgres);
+}
+mod calibration {
+    crate::store::calibration::calibration_sql!(PgStore, sqlx::Postgres);
+}
+mod gearboxes {
+    crate::store::gearboxes::gearboxes_sql!(PgStore, sqlx::Postgres);
+}
+mod baselines {
+    crate::store::baselines::baselines_sql!(PgStore, sqlx::Postgres);
+}

@@ -35,7 +35,50 @@ impl SqliteStore {
     }
 }
 
-super::impl_store!(SqliteStore, sqlx::Sqlite, "sqlite");
+#[async_trait::async_trait]
+impl super::Store for SqliteStore {
+    fn kind(&self) -> &'static str {
+        "sqlite"
+    }
+
+    async fn ping(&self) -> super::StoreResult<()> {
+        sqlx::query("SELECT 1").execute(&self.pool).await?;
+        Ok(())
+    }
+
+    async fn close(&self) {
+        self.pool.close().await;
+    }
+}
+
+// The SQL of each resource on this backend, one module each.
+mod keys {
+    crate::store::keys::keys_sql!(SqliteStore, sqlx::Sqlite);
+}
+mod ingest {
+    crate::store::ingest::ingest_sql!(SqliteStore, sqlx::Sqlite, one_query: true);
+}
+mod diagnoses {
+    crate::store::diagnoses::diagnoses_sql!(SqliteStore, sqlx::Sqlite);
+}
+mod machines {
+    crate::store::machines::machines_sql!(SqliteStore, sqlx::Sqlite);
+}
+mod webhooks {
+    crate::store::webhooks::webhooks_sql!(SqliteStore, sqlx::Sqlite);
+}
+mod retention {
+    crate::store::retention::retention_sql!(SqliteStore, sqlx::Sqlite);
+}
+mod calibration {
+    crate::store::calibration::calibration_sql!(SqliteStore, sqlx::Sqlite);
+}
+mod gearboxes {
+    crate::store::gearboxes::gearboxes_sql!(SqliteStore, sqlx::Sqlite);
+}
+mod baselines {
+    crate::store::baselines::baselines_sql!(SqliteStore, sqlx::Sqlite);
+}
 
 #[cfg(test)]
 mod tests {

@@ -1,0 +1,177 @@
+//! Stored diagnoses, their alert levels and the JSON views of their wear and novelty.
+
+use async_trait::async_trait;
+
+use super::StoreResult;
+
+/// Alert levels in increasing severity.
+pub const LEVELS: [&str; 4] = ["unknown", "ok", "warning", "alarm"];
+
+pub fn level_rank(level: &str) -> usize {
+    LEVELS.iter().position(|l| *l == level).unwrap_or(0)
+}
+
+/// A diagnosis; `body`/`spectrum` are JSON texts, empty in summaries.
+#[derive(Debug, Clone)]
+pub struct DiagnosisRow {
+    pub seq: i64,
+    pub id: String,
+    pub record_id: String,
+    pub machine_id: String,
+    pub created_at: i64,
+    pub ea_estimate: f64,
+    pub ea_lower: f64,
+    pub ea_upper: f64,
+    pub alert_level: String,
+    pub motion_state: String,
+    pub body: String,
+    pub spectrum: String,
+    /// False when the diagnosis has no wear degree (its gearbox's table was not ready).
+    pub has_wear: bool,
+    /// Novelty against the machine's baseline (deciding channel), when it has one.
+    pub novelty_score: Option<f64>,
+    pub novelty_threshold: Option<f64>,
+    /// The channel that decides the alert.
+    pub channel: Option<String>,
+}
+
+/// `{estimate, lower, upper}`, or null for a diagnosis without a wear degree.
+pub fn wear_json(d: &DiagnosisRow) -> serde_json::Value {
+    if d.has_wear {
+        serde_json::json!({"estimate": d.ea_estimate, "lower": d.ea_lower, "upper": d.ea_upper})
+    } else {
+        serde_json::Value::Null
+    }
+}
+
+/// `{score, threshold, anomalous}`, or null without a baseline.
+pub fn novelty_json(d: &DiagnosisRow) -> serde_json::Value {
+    match (d.novelty_score, d.novelty_threshold) {
+        (Some(s), Some(t)) => {
+            serde_json::json!({"score": s, "threshold": t, "anomalous": s > t})
+        }
+        _ => serde_json::Value::Null,
+    }
+}
+
+/// Reading diagnoses back (they are written by
+/// [`IngestStore::ingest`](super::IngestStore::ingest)).
+#[async_trait]
+pub trait DiagnosisStore: Send + Sync {
+    /// Diagnosis summaries (no body) of one machine with `seq > after` and
+    /// `created_at > since`, oldest first.
+    async fn list_diagnoses(
+        &self,
+        machine_id: &str,
+        after: i64,
+        since: i64,
+        limit: i64,
+    ) -> StoreResult<Vec<DiagnosisRow>>;
+    /// The latest `limit` diagnosis summaries of one machine, oldest first.
+    async fn recent_diagnoses(
+        &self,
+        machine_id: &str,
+        limit: i64,
+    ) -> StoreResult<Vec<DiagnosisRow>>;
+    async fn get_diagnosis(&self, id: &str) -> StoreResult<Option<DiagnosisRow>>;
+}
+
+/// The SQL of [`DiagnosisStore`] for one backend: `$store` is the store type, `$db` its
+/// sqlx database; invoked in a module of its own inside the backend's module. Both backends
+/// run the same text.
+macro_rules! diagnoses_sql {
+    ($store:ident, $db:ty) => {
+        use super::$store;
+        use sqlx::Row;
+        use $crate::store::*;
+
+        const SUMMARY_COLS: &str = "seq, id, record_id, machine_id, created_at, ea_estimate, \
+            ea_lower, ea_upper, alert_level, motion_state, has_wear, novelty_score, \
+            novelty_threshold, channel";
+
+        fn diagnosis_row(
+            r: &<$db as sqlx::Database>::Row,
+            full: bool,
+        ) -> StoreResult<DiagnosisRow> {
+            Ok(DiagnosisRow {
+                seq: r.try_get("seq")?,
+                id: r.try_get("id")?,
+                record_id: r.try_get("record_id")?,
+                machine_id: r.try_get("machine_id")?,
+                created_at: r.try_get("created_at")?,
+                ea_estimate: r.try_get("ea_estimate")?,
+                ea_lower: r.try_get("ea_lower")?,
+                ea_upper: r.try_get("ea_upper")?,
+                alert_level: r.try_get("alert_level")?,
+                motion_state: r.try_get("motion_state")?,
+                body: if full {
+                    r.try_get("body")?
+                } else {
+                    String::new()
+                },
+                spectrum: if full {
+                    r.try_get("spectrum")?
+                } else {
+                    String::new()
+                },
+                has_wear: r.try_get::<i64, _>("has_wear")? != 0,
+                novelty_score: r.try_get("novelty_score")?,
+                novelty_threshold: r.try_get("novelty_threshold")?,
+                channel: r.try_get("channel")?,
+            })
+        }
+
+        #[async_trait::async_trait]
+        impl $crate::store::DiagnosisStore for $store {
+            async fn list_diagnoses(
+                &self,
+                machine_id: &str,
+                after: i64,
+                since: i64,
+                limit: i64,
+            ) -> StoreResult<Vec<DiagnosisRow>> {
+                let rows = sqlx::query(sqlx::AssertSqlSafe(format!(
+                    "SELECT {SUMMARY_COLS} FROM diagnoses WHERE machine_id = $1 AND seq > $2 \
+                     AND created_at > $3 ORDER BY seq LIMIT $4"
+                )))
+                .bind(machine_id)
+                .bind(after)
+                .bind(since)
+                .bind(limit)
+                .fetch_all(&self.pool)
+                .await?;
+                rows.iter().map(|r| diagnosis_row(r, false)).collect()
+            }
+
+            async fn recent_diagnoses(
+                &self,
+                machine_id: &str,
+                limit: i64,
+            ) -> StoreResult<Vec<DiagnosisRow>> {
+                let rows = sqlx::query(sqlx::AssertSqlSafe(format!(
+                    "SELECT {SUMMARY_COLS} FROM diagnoses WHERE machine_id = $1 \
+                     ORDER BY seq DESC LIMIT $2"
+                )))
+                .bind(machine_id)
+                .bind(limit)
+                .fetch_all(&self.pool)
+                .await?;
+                let mut v: Vec<DiagnosisRow> = rows
+                    .iter()
+                    .map(|r| diagnosis_row(r, false))
+                    .collect::<StoreResult<_>>()?;
+                v.reverse();
+                Ok(v)
+            }
+
+            async fn get_diagnosis(&self, id: &str) -> StoreResult<Option<DiagnosisRow>> {
+                let r = sqlx::query("SELECT * FROM diagnoses WHERE id = $1")
+                    .bind(id)
+                    .fetch_optional(&self.pool)
+                    .await?;
+                r.as_ref().map(|r| diagnosis_row(r, true)).transpose()
+            }
+        }
+    };
+}
+pub(crate) use diagnoses_sql;
