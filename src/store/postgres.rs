@@ -43,7 +43,7 @@ mod keys {
     crate::store::keys::keys_sql!(PgStore, sqlx::Postgres);
 }
 mod ingest {
-    crate::store::ingest::ingest_sql!(PgStore, sqlx::Postgres, one_query: false);
+    crate::store::ingest::ingest_sql!(PgStore, sqlx::Postgres);
 }
 mod diagnoses {
     crate::store::diagnoses::diagnoses_sql!(PgStore, sqlx::Postgres);

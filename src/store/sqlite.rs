@@ -56,7 +56,7 @@ mod keys {
     crate::store::keys::keys_sql!(SqliteStore, sqlx::Sqlite);
 }
 mod ingest {
-    crate::store::ingest::ingest_sql!(SqliteStore, sqlx::Sqlite, one_query: true);
+    crate::store::ingest::ingest_sql!(SqliteStore, sqlx::Sqlite);
 }
 mod diagnoses {
     crate::store::diagnoses::diagnoses_sql!(SqliteStore, sqlx::Sqlite);
