@@ -243,11 +243,10 @@ fn flexible_shafts(d: &GearboxDescription, dofs: &Dofs) -> Vec<(String, String, 
 /// input shaft's rate at input 1 Hz).
 fn input_torque(cx: &mut Ctx, s: &Settings, k_ref: f64, member: (f64, f64), n_in: f64) -> f64 {
     let (r_in, n_member) = member;
-    let (static_load, input_torque, b_ref) = (s.static_load, s.input_torque, s.b_ref);
-    let input_torque_nm = match input_torque {
+    match s.input_torque {
         Some(t) => t,
         None => {
-            let f = match static_load {
+            let f = match s.static_load {
                 Some(f) => f,
                 None => cx.assume(
                     "static load F̄1".into(),
@@ -258,10 +257,9 @@ fn input_torque(cx: &mut Ctx, s: &Settings, k_ref: f64, member: (f64, f64), n_in
             };
             // Torque on the member that drives the reference mesh, carried to the input by
             // power conservation (lossless): T_in = T_member · n_member / n_in.
-            f * k_ref * b_ref * r_in * (n_member / n_in)
+            f * k_ref * s.b_ref * r_in * (n_member / n_in)
         }
-    };
-    input_torque_nm
+    }
 }
 
 /// Mesh frequencies over the reference (stage-1) mesh frequency, per stage; stage 1's is 1
