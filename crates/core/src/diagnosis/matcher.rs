@@ -126,7 +126,7 @@ impl Matcher {
     /// This matcher with the variance of every feature `d` raised by `extra[d]` at every
     /// entry (same length as the features; non-finite or negative values count as 0): a
     /// feature known less well than the table says — one an effect outside the table changes
-    /// by an uncertain amount ([`diagnose_shifted`]) — weighs less in the likelihood.
+    /// by an uncertain amount ([`diagnose_shifted`](super::diagnose_shifted)) — weighs less in the likelihood.
     pub fn with_extra_variance(&self, extra: &[f64]) -> Matcher {
         let add = |d: usize| extra.get(d).copied().filter(|v| *v > 0.0).unwrap_or(0.0);
         let mut m = self.clone();

@@ -74,7 +74,7 @@ pub fn diagnose_with(
 }
 
 /// [`diagnose_with`], also handing back the spectrum its f1 search computed: the record's
-/// Hann-windowed [`amplitude_spectrum`] (`None` for a record over 2^17 samples, searched on a
+/// Hann-windowed [`amplitude_spectrum`](crate::signal::amplitude_spectrum) (`None` for a record over 2^17 samples, searched on a
 /// Welch average). The service plots that spectrum instead of transforming the record again.
 pub fn diagnose_with_spectrum(
     record: &Record,
@@ -86,7 +86,7 @@ pub fn diagnose_with_spectrum(
 }
 
 /// [`diagnose`] with known effects the table does not hold **held fixed**: `shift[k]` (the
-/// change those effects make to unclipped feature `k` of [`LineMeasurement::features`], same
+/// change those effects make to unclipped feature `k` of [`LineMeasurement::features`](crate::signal::lines::LineMeasurement::features), same
 /// order and length) is subtracted from the record's features before they are clipped and
 /// matched, and `shift_var[k]` (that change's own uncertainty, ln-units²) is added to the
 /// feature's variance at every table entry ([`Matcher::with_extra_variance`]), so the posterior

@@ -103,7 +103,7 @@ pub struct RecordInfo {
     pub segment_len: usize,
 }
 
-/// The answer of [`diagnose`] (also the JSON of `gearwear diagnose`).
+/// The answer of [`diagnose`](super::diagnose) (also the JSON of `gearwear diagnose`).
 #[derive(Debug, Clone, Serialize)]
 pub struct Diagnosis {
     pub wear_degree: WearDegree,

@@ -5,7 +5,7 @@
 //! local floor) inside the admissible band is scored by its own prominence plus the prominence
 //! of its kinematic partners (the caller's `(name, ratio)` list: the other stages' mesh lines,
 //! their combination tones, `2 f1`, …); the best candidate wins (or its half-frequency
-//! neighbour, see [`locate_f1`]) and is refined the same way. The diagnosis
+//! neighbour, see `locate_f1`) and is refined the same way. The diagnosis
 //! ([`crate::diagnosis`]) uses it.
 
 use serde::Serialize;
