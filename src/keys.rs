@@ -14,60 +14,7 @@ use hmac::{KeyInit, Mac};
 use sha2::{Digest, Sha256};
 use subtle::ConstantTimeEq;
 
-/// What a key may do.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Scope {
-    /// POST records.
-    Ingest,
-    /// GET machines, diagnoses, the dashboard.
-    Read,
-    /// Manage webhooks (and everything else).
-    Admin,
-}
-
-impl Scope {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Scope::Ingest => "ingest",
-            Scope::Read => "read",
-            Scope::Admin => "admin",
-        }
-    }
-
-    pub fn parse(s: &str) -> Option<Scope> {
-        match s.trim() {
-            "ingest" => Some(Scope::Ingest),
-            "read" => Some(Scope::Read),
-            "admin" => Some(Scope::Admin),
-            _ => None,
-        }
-    }
-
-    /// `"ingest,read"` → scopes, sorted and deduplicated; `Err(word)` names an unknown scope.
-    pub fn parse_list(s: &str) -> Result<Vec<Scope>, String> {
-        let mut out = Vec::new();
-        for w in s.split(',').filter(|w| !w.trim().is_empty()) {
-            out.push(Scope::parse(w).ok_or_else(|| w.trim().to_string())?);
-        }
-        out.sort();
-        out.dedup();
-        Ok(out)
-    }
-
-    pub fn join(scopes: &[Scope]) -> String {
-        scopes
-            .iter()
-            .map(|s| s.as_str())
-            .collect::<Vec<_>>()
-            .join(",")
-    }
-}
-
-/// Does a key with `held` scopes grant `needed`? `admin` grants everything.
-pub fn grants(held: &[Scope], needed: Scope) -> bool {
-    held.contains(&needed) || held.contains(&Scope::Admin)
-}
+pub use gearwear_store::keys::{Scope, grants};
 
 /// A freshly generated key: the full token (shown once) and what gets stored.
 #[derive(Debug, Clone)]

@@ -19,11 +19,10 @@ pub use gearwear_core::{
     signal, signature, solver,
 };
 pub use gearwear_plot as plot;
+pub use gearwear_store::{self as store, time};
 
 pub mod cli;
 pub mod configuration;
 pub mod keys;
 pub mod service;
-pub mod store;
 pub mod telemetry;
-pub mod time;

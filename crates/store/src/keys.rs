@@ -4,7 +4,61 @@ use async_trait::async_trait;
 use serde::Serialize;
 
 use super::StoreResult;
-use crate::keys::Scope;
+
+/// What a key may do.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Scope {
+    /// POST records.
+    Ingest,
+    /// GET machines, diagnoses, the dashboard.
+    Read,
+    /// Manage webhooks (and everything else).
+    Admin,
+}
+
+impl Scope {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Scope::Ingest => "ingest",
+            Scope::Read => "read",
+            Scope::Admin => "admin",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Scope> {
+        match s.trim() {
+            "ingest" => Some(Scope::Ingest),
+            "read" => Some(Scope::Read),
+            "admin" => Some(Scope::Admin),
+            _ => None,
+        }
+    }
+
+    /// `"ingest,read"` → scopes, sorted and deduplicated; `Err(word)` names an unknown scope.
+    pub fn parse_list(s: &str) -> Result<Vec<Scope>, String> {
+        let mut out = Vec::new();
+        for w in s.split(',').filter(|w| !w.trim().is_empty()) {
+            out.push(Scope::parse(w).ok_or_else(|| w.trim().to_string())?);
+        }
+        out.sort();
+        out.dedup();
+        Ok(out)
+    }
+
+    pub fn join(scopes: &[Scope]) -> String {
+        scopes
+            .iter()
+            .map(|s| s.as_str())
+            .collect::<Vec<_>>()
+            .join(",")
+    }
+}
+
+/// Does a key with `held` scopes grant `needed`? `admin` grants everything.
+pub fn grants(held: &[Scope], needed: Scope) -> bool {
+    held.contains(&needed) || held.contains(&Scope::Admin)
+}
 
 /// An API key as stored (hash only).
 #[derive(Debug, Clone, Serialize)]
@@ -37,7 +91,7 @@ macro_rules! keys_sql {
         use super::$store;
         use sqlx::Row;
         use $crate::keys::Scope;
-        use $crate::store::*;
+        use $crate::*;
 
         fn key_row(r: &<$db as sqlx::Database>::Row) -> StoreResult<KeyRow> {
             let scopes: String = r.try_get("scopes")?;
@@ -52,7 +106,7 @@ macro_rules! keys_sql {
         }
 
         #[async_trait::async_trait]
-        impl $crate::store::KeyStore for $store {
+        impl $crate::KeyStore for $store {
             async fn insert_key(&self, k: &KeyRow) -> StoreResult<()> {
                 sqlx::query(
                     "INSERT INTO api_keys (id, hash, scopes, label, created_at, revoked_at) \

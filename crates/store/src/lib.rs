@@ -34,6 +34,7 @@ pub mod postgres;
 pub mod queue;
 pub mod retention;
 pub mod sqlite;
+pub mod time;
 pub mod webhooks;
 
 pub use baselines::{BaselineRecord, BaselineStore};

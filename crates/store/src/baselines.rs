@@ -45,10 +45,10 @@ macro_rules! baselines_sql {
     ($store:ident, $db:ty) => {
         use super::$store;
         use sqlx::Row;
-        use $crate::store::*;
+        use $crate::*;
 
         #[async_trait::async_trait]
-        impl $crate::store::BaselineStore for $store {
+        impl $crate::BaselineStore for $store {
             async fn set_baseline(
                 &self,
                 machine_id: &str,

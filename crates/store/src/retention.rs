@@ -19,10 +19,10 @@ pub trait RetentionStore: Send + Sync {
 macro_rules! retention_sql {
     ($store:ident, $db:ty) => {
         use super::$store;
-        use $crate::store::*;
+        use $crate::*;
 
         #[async_trait::async_trait]
-        impl $crate::store::RetentionStore for $store {
+        impl $crate::RetentionStore for $store {
             async fn purge_samples(&self, before: i64) -> StoreResult<u64> {
                 let r = sqlx::query(
                     "UPDATE records SET samples = NULL \

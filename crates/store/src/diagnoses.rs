@@ -83,7 +83,7 @@ macro_rules! diagnoses_sql {
     ($store:ident, $db:ty) => {
         use super::$store;
         use sqlx::Row;
-        use $crate::store::*;
+        use $crate::*;
 
         const SUMMARY_COLS: &str = "seq, id, record_id, machine_id, created_at, ea_estimate, \
             ea_lower, ea_upper, alert_level, motion_state, has_wear, novelty_score, \
@@ -122,7 +122,7 @@ macro_rules! diagnoses_sql {
         }
 
         #[async_trait::async_trait]
-        impl $crate::store::DiagnosisStore for $store {
+        impl $crate::DiagnosisStore for $store {
             async fn list_diagnoses(
                 &self,
                 machine_id: &str,

@@ -17,7 +17,9 @@ impl PgStore {
             .acquire_timeout(Duration::from_secs(5))
             .connect(url)
             .await?;
-        sqlx::migrate!("migrations/postgres").run(&pool).await?;
+        sqlx::migrate!("../../migrations/postgres")
+            .run(&pool)
+            .await?;
         Ok(PgStore { pool })
     }
 }
@@ -40,29 +42,29 @@ impl super::Store for PgStore {
 
 // The SQL of each resource on this backend, one module each.
 mod keys {
-    crate::store::keys::keys_sql!(PgStore, sqlx::Postgres);
+    crate::keys::keys_sql!(PgStore, sqlx::Postgres);
 }
 mod ingest {
-    crate::store::ingest::ingest_sql!(PgStore, sqlx::Postgres);
+    crate::ingest::ingest_sql!(PgStore, sqlx::Postgres);
 }
 mod diagnoses {
-    crate::store::diagnoses::diagnoses_sql!(PgStore, sqlx::Postgres);
+    crate::diagnoses::diagnoses_sql!(PgStore, sqlx::Postgres);
 }
 mod machines {
-    crate::store::machines::machines_sql!(PgStore, sqlx::Postgres);
+    crate::machines::machines_sql!(PgStore, sqlx::Postgres);
 }
 mod webhooks {
-    crate::store::webhooks::webhooks_sql!(PgStore, sqlx::Postgres);
+    crate::webhooks::webhooks_sql!(PgStore, sqlx::Postgres);
 }
 mod retention {
-    crate::store::retention::retention_sql!(PgStore, sqlx::Postgres);
+    crate::retention::retention_sql!(PgStore, sqlx::Postgres);
 }
 mod calibration {
-    crate::store::calibration::calibration_sql!(PgStore, sqlx::Postgres);
+    crate::calibration::calibration_sql!(PgStore, sqlx::Postgres);
 }
 mod gearboxes {
-    crate::store::gearboxes::gearboxes_sql!(PgStore, sqlx::Postgres);
+    crate::gearboxes::gearboxes_sql!(PgStore, sqlx::Postgres);
 }
 mod baselines {
-    crate::store::baselines::baselines_sql!(PgStore, sqlx::Postgres);
+    crate::baselines::baselines_sql!(PgStore, sqlx::Postgres);
 }

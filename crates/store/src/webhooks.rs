@@ -77,7 +77,7 @@ macro_rules! webhooks_sql {
     ($store:ident, $db:ty) => {
         use super::$store;
         use sqlx::Row;
-        use $crate::store::*;
+        use $crate::*;
 
         pub(crate) fn webhook_row(r: &<$db as sqlx::Database>::Row) -> StoreResult<WebhookRow> {
             let events: String = r.try_get("events")?;
@@ -109,7 +109,7 @@ macro_rules! webhooks_sql {
         }
 
         #[async_trait::async_trait]
-        impl $crate::store::WebhookStore for $store {
+        impl $crate::WebhookStore for $store {
             async fn insert_webhook(&self, w: &WebhookRow) -> StoreResult<()> {
                 sqlx::query(
                     "INSERT INTO webhooks (id, url, secret, events, created_at) \

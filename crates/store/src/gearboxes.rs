@@ -96,7 +96,7 @@ macro_rules! gearboxes_sql {
     ($store:ident, $db:ty) => {
         use super::$store;
         use sqlx::Row;
-        use $crate::store::*;
+        use $crate::*;
 
         const GEARBOX_COLS: &str = "id, name, source, source_format, description, hash, builtin, \
             status, progress, error, claimed_by, lease_until, attempts, created_at, updated_at, \
@@ -125,7 +125,7 @@ macro_rules! gearboxes_sql {
         }
 
         #[async_trait::async_trait]
-        impl $crate::store::GearboxStore for $store {
+        impl $crate::GearboxStore for $store {
             async fn put_gearbox(&self, g: &GearboxRow) -> StoreResult<PutOutcome> {
                 let mut tx = self.pool.begin().await?;
                 // A write first (SQLite takes its write lock at once).

@@ -100,7 +100,7 @@ macro_rules! ingest_sql {
         use super::webhooks::webhook_row;
         use super::$store;
         use sqlx::Row;
-        use $crate::store::*;
+        use $crate::*;
 
         /// Every write of one accepted record, inside the caller's transaction.
         async fn ingest_in(tx: &mut sqlx::Transaction<'_, $db>, ing: &Ingest) -> StoreResult<()> {
@@ -232,7 +232,7 @@ macro_rules! ingest_sql {
         }
 
         #[async_trait::async_trait]
-        impl $crate::store::IngestStore for $store {
+        impl $crate::IngestStore for $store {
             async fn get_idempotent(
                 &self,
                 key_id: &str,

@@ -46,7 +46,7 @@ macro_rules! machines_sql {
     ($store:ident, $db:ty) => {
         use super::$store;
         use sqlx::Row;
-        use $crate::store::*;
+        use $crate::*;
 
         pub(crate) fn machine_row(r: &<$db as sqlx::Database>::Row) -> StoreResult<MachineRow> {
             Ok(MachineRow {
@@ -65,7 +65,7 @@ macro_rules! machines_sql {
         }
 
         #[async_trait::async_trait]
-        impl $crate::store::MachineStore for $store {
+        impl $crate::MachineStore for $store {
             async fn list_machines(&self) -> StoreResult<Vec<MachineRow>> {
                 let rows = sqlx::query("SELECT * FROM machines ORDER BY id")
                     .fetch_all(&self.pool)

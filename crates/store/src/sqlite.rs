@@ -30,7 +30,7 @@ impl SqliteStore {
             .acquire_timeout(Duration::from_secs(10))
             .connect_with(opts)
             .await?;
-        sqlx::migrate!("migrations/sqlite").run(&pool).await?;
+        sqlx::migrate!("../../migrations/sqlite").run(&pool).await?;
         Ok(SqliteStore { pool })
     }
 }
@@ -53,31 +53,31 @@ impl super::Store for SqliteStore {
 
 // The SQL of each resource on this backend, one module each.
 mod keys {
-    crate::store::keys::keys_sql!(SqliteStore, sqlx::Sqlite);
+    crate::keys::keys_sql!(SqliteStore, sqlx::Sqlite);
 }
 mod ingest {
-    crate::store::ingest::ingest_sql!(SqliteStore, sqlx::Sqlite);
+    crate::ingest::ingest_sql!(SqliteStore, sqlx::Sqlite);
 }
 mod diagnoses {
-    crate::store::diagnoses::diagnoses_sql!(SqliteStore, sqlx::Sqlite);
+    crate::diagnoses::diagnoses_sql!(SqliteStore, sqlx::Sqlite);
 }
 mod machines {
-    crate::store::machines::machines_sql!(SqliteStore, sqlx::Sqlite);
+    crate::machines::machines_sql!(SqliteStore, sqlx::Sqlite);
 }
 mod webhooks {
-    crate::store::webhooks::webhooks_sql!(SqliteStore, sqlx::Sqlite);
+    crate::webhooks::webhooks_sql!(SqliteStore, sqlx::Sqlite);
 }
 mod retention {
-    crate::store::retention::retention_sql!(SqliteStore, sqlx::Sqlite);
+    crate::retention::retention_sql!(SqliteStore, sqlx::Sqlite);
 }
 mod calibration {
-    crate::store::calibration::calibration_sql!(SqliteStore, sqlx::Sqlite);
+    crate::calibration::calibration_sql!(SqliteStore, sqlx::Sqlite);
 }
 mod gearboxes {
-    crate::store::gearboxes::gearboxes_sql!(SqliteStore, sqlx::Sqlite);
+    crate::gearboxes::gearboxes_sql!(SqliteStore, sqlx::Sqlite);
 }
 mod baselines {
-    crate::store::baselines::baselines_sql!(SqliteStore, sqlx::Sqlite);
+    crate::baselines::baselines_sql!(SqliteStore, sqlx::Sqlite);
 }
 
 #[cfg(test)]
@@ -88,7 +88,7 @@ mod tests {
     use sqlx::Connection;
     use sqlx::sqlite::{SqliteConnectOptions, SqliteConnection, SqliteJournalMode};
 
-    use crate::store::StoreError;
+    use crate::StoreError;
 
     fn code(e: &sqlx::Error) -> String {
         match e {

@@ -33,10 +33,10 @@ macro_rules! calibration_sql {
     ($store:ident, $db:ty) => {
         use super::$store;
         use sqlx::Row;
-        use $crate::store::*;
+        use $crate::*;
 
         #[async_trait::async_trait]
-        impl $crate::store::CalibrationStore for $store {
+        impl $crate::CalibrationStore for $store {
             async fn put_calibration(&self, c: &CalibrationRow) -> StoreResult<()> {
                 sqlx::query(
                     "INSERT INTO calibrations (machine_id, id, created_at, effects, report) \
