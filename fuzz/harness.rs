@@ -16,7 +16,7 @@ use gearwear::record::{
     parse_record_channels,
 };
 use gearwear::service::error::ApiError;
-use gearwear::service::records::{BodyFormat, Decoded, JsonRecord, decode, parse_query};
+use gearwear::service::wire::{BodyFormat, Decoded, JsonRecord, decode, parse_query};
 
 /// Sample rate the harnesses pass where a format needs one (Hz).
 const FS: f64 = 25_600.0;

@@ -44,25 +44,8 @@ pub struct Limits {
     pub request_timeout: Duration,
 }
 
-/// Wear-degree thresholds (ea, units of the backlash b) that set a machine's alert level:
-/// `ok` below `warning`, `warning` below `alarm`, then `alarm`.
-#[derive(Debug, Clone, Copy, serde::Serialize)]
-pub struct Thresholds {
-    pub warning: f64,
-    pub alarm: f64,
-}
-
-impl Thresholds {
-    pub fn level(&self, ea: f64) -> &'static str {
-        if ea >= self.alarm {
-            "alarm"
-        } else if ea >= self.warning {
-            "warning"
-        } else {
-            "ok"
-        }
-    }
-}
+/// The alert policy's wear-degree thresholds (in the core, with the policy).
+pub use crate::assessment::Thresholds;
 
 /// Webhook delivery: retries with exponential back-off, `base · 2^(attempt−1)` capped at
 /// `max_backoff`, up to `max_attempts`.

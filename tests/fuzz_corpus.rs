@@ -156,7 +156,7 @@ fn mutated_bodies_get_serde_json_s_answer() {
             }
         }
         total += 1;
-        if gearwear::service::records::fast_json_record(&b).is_some() {
+        if gearwear::service::wire::fast_json_record(&b).is_some() {
             taken += 1;
         }
         harness::json_fast_path_agrees(&b);

@@ -1,6 +1,7 @@
 //! The `precompute` and `diagnose` commands (argument structs and bodies; [`crate::cli`]
 //! dispatches to them).
 
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
@@ -8,8 +9,12 @@ use clap::{Args, ValueEnum};
 
 use super::common::{RigArgs, default_table_for, load_table, parse_range, progress_bar};
 use crate::analysis::bifurcation::grid;
-use crate::diagnosis::{DiagnoseOptions, diagnose};
-use crate::novelty::{MIN_BASELINE_RECORDS, MachineBaseline, record_features};
+use crate::assessment::{
+    GearboxRef, Machine, MachineCalibration, RecordFacts, TableDiagnoser, Thresholds, assess,
+    baseline_features,
+};
+use crate::diagnosis::DiagnoseOptions;
+use crate::novelty::{MIN_BASELINE_RECORDS, MachineBaseline};
 use crate::record::{Column, Format, ReadOptions, read_record};
 use crate::signal::lines::SEGMENT_PERIODS;
 use crate::signature::SensorQuantity;
@@ -114,11 +119,22 @@ pub struct DiagnoseArgs {
     #[arg(long, value_name = "FILE")]
     pub gearbox: Option<PathBuf>,
     /// A healthy record of the same machine (same column and sample-rate options); give at
-    /// least three (`--baseline a.csv --baseline b.csv …`). The diagnosis then carries
-    /// `novelty`: the record's score against these records' features, the threshold calibrated
-    /// on them by leave-one-out, and the features that deviate most.
+    /// least three (`--baseline a.csv --baseline b.csv …`). The assessment's `novelty` is then
+    /// the record's score against these records' features, the threshold calibrated on them by
+    /// leave-one-out, and the features that deviate most (null without `--baseline`).
     #[arg(long, value_name = "FILE")]
     pub baseline: Vec<PathBuf>,
+    /// The machine's calibration: the JSON of `GET /v1/machines/{id}/calibration` (or of the
+    /// `POST` that made it). The record is then diagnosed with the calibrated effects, as the
+    /// service diagnoses that machine's records (`calibration` in the answer).
+    #[arg(long, value_name = "FILE")]
+    pub calibration: Option<PathBuf>,
+    /// Wear degree (ea) at which the alert level turns `warning` (as `serve --warning-ea`).
+    #[arg(long, default_value_t = Thresholds::default().warning)]
+    pub warning_ea: f64,
+    /// Wear degree (ea) at which the alert level turns `alarm` (as `serve --alarm-ea`).
+    #[arg(long, default_value_t = Thresholds::default().alarm)]
+    pub alarm_ea: f64,
 }
 
 /// `gearwear precompute`.
@@ -217,8 +233,14 @@ pub fn precompute_cmd(a: PrecomputeArgs) -> Result<()> {
     Ok(())
 }
 
-/// `gearwear diagnose`.
+/// `gearwear diagnose`: the record's [`Assessment`], built by the same core function as the
+/// service's answer to `POST /v1/machines/{id}/records` — the `--baseline` files as the
+/// machine's baseline, `--calibration` as its calibration, `--warning-ea`/`--alarm-ea` as its
+/// thresholds.
 pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
+    if !(a.warning_ea < a.alarm_ea) {
+        bail!("--warning-ea must be below --alarm-ea");
+    }
     let table = load_table(a.gearbox.as_deref(), a.table.as_deref(), a.allow_stale)?;
     let opts = ReadOptions {
         format: a.format.map(|f| match f {
@@ -230,54 +252,130 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
         column: a.column.as_deref().map(Column::parse),
     };
     let record = read_record(&a.input, &opts)?;
-    // Baseline first: a wrong baseline file should fail before the diagnosis runs.
-    let baseline = if a.baseline.is_empty() {
-        None
-    } else {
-        // Order tracking needs the gearbox's tooth counts: only with a description.
-        let gb = a.gearbox.is_some().then(|| table.gearbox());
-        let mut feats = Vec::with_capacity(a.baseline.len());
-        for path in &a.baseline {
-            let rec = read_record(path, &opts)
-                .with_context(|| format!("baseline record {}", path.display()))?;
-            feats.push(
-                record_features(&rec, gb, a.shaft_hz)
-                    .with_context(|| format!("baseline record {}", path.display()))?,
-            );
-        }
-        let b = MachineBaseline::fit(&feats).with_context(|| {
-            format!(
-                "{} --baseline file(s) given; give at least {MIN_BASELINE_RECORDS} healthy \
-                 records of the machine",
-                a.baseline.len()
-            )
-        })?;
-        let f = record_features(&record, gb, a.shaft_hz)?;
-        Some(b.score(&f))
-    };
-    let d = diagnose(
-        &record,
-        &table,
-        &DiagnoseOptions {
-            shaft_hz: a.shaft_hz,
+    let calibration = a.calibration.as_deref().map(read_calibration).transpose()?;
+    let diagnoser = TableDiagnoser::new(
+        table,
+        DiagnoseOptions {
             credible_level: a.level,
             ..Default::default()
         },
     )?;
-    /// The diagnosis's fields in their order, then `novelty`.
-    #[derive(serde::Serialize)]
-    struct WithNovelty<'a> {
-        #[serde(flatten)]
-        diagnosis: &'a crate::diagnosis::Diagnosis,
-        novelty: crate::novelty::Novelty,
-    }
-    let json = match baseline {
-        Some(novelty) => serde_json::to_string_pretty(&WithNovelty {
-            diagnosis: &d,
-            novelty,
-        })?,
-        None => serde_json::to_string_pretty(&d)?,
+    let gearbox = diagnoser.table().gearbox();
+    let gearbox_ref = GearboxRef {
+        id: match &a.gearbox {
+            Some(p) => p
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            None if gearbox.name() == crate::gearbox::Gearbox::paper_rig().name() => {
+                crate::service::gearboxes::BUILTIN_ID.to_string()
+            }
+            None => gearbox.name().to_string(),
+        },
+        name: gearbox.name().to_string(),
+        hash: gearbox.hash.clone(),
+        table_status: "ready".into(),
+        table_progress: 1.0,
     };
-    println!("{json}");
+    let facts = RecordFacts {
+        sample_rate_hz: record.sample_rate,
+        shaft_hz: a.shaft_hz,
+        sensor: None,
+        declared_healthy: false,
+    };
+    let channel = a.column.clone().unwrap_or_else(|| "0".into());
+    let mut machine = Machine {
+        gearbox,
+        gearbox_ref,
+        // Order tracking needs the gearbox's tooth counts: only with a description.
+        described: a.gearbox.is_some(),
+        diagnoser: Some(&diagnoser),
+        table_note: None,
+        input_shaft_hz: None,
+        baselines: &BTreeMap::new(),
+        baseline_counts: &BTreeMap::new(),
+        calibration: calibration.as_ref(),
+        thresholds: Thresholds {
+            warning: a.warning_ea,
+            alarm: a.alarm_ea,
+        },
+    };
+    // Baseline first: a wrong baseline file should fail before the diagnosis runs.
+    let (baselines, baseline_counts) = baseline(&a, &opts, &channel, &machine)?;
+    machine.baselines = &baselines;
+    machine.baseline_counts = &baseline_counts;
+    let mut channels = vec![(channel, record.samples)];
+    let assessment = assess(&mut channels, &[0], &facts, &machine, &mut |_| {})?;
+    println!("{}", serde_json::to_string_pretty(&assessment)?);
     Ok(())
+}
+
+/// The machine's baseline from the `--baseline` files: their features as the service computes
+/// them for records posted with `?baseline=true`, fitted; `(fitted, records)` by channel
+/// (empty without `--baseline`).
+fn baseline(
+    a: &DiagnoseArgs,
+    opts: &ReadOptions,
+    channel: &str,
+    machine: &Machine,
+) -> Result<(BTreeMap<String, MachineBaseline>, BTreeMap<String, usize>)> {
+    if a.baseline.is_empty() {
+        return Ok(Default::default());
+    }
+    let mut feats = Vec::with_capacity(a.baseline.len());
+    for path in &a.baseline {
+        let rec = read_record(path, opts)
+            .with_context(|| format!("baseline record {}", path.display()))?;
+        let facts = RecordFacts {
+            sample_rate_hz: rec.sample_rate,
+            shaft_hz: a.shaft_hz,
+            sensor: None,
+            declared_healthy: true,
+        };
+        feats.push(
+            baseline_features(&rec, &facts, machine)
+                .with_context(|| format!("baseline record {}", path.display()))?,
+        );
+    }
+    let b = MachineBaseline::fit(&feats).with_context(|| {
+        format!(
+            "{} --baseline file(s) given; give at least {MIN_BASELINE_RECORDS} healthy \
+             records of the machine",
+            a.baseline.len()
+        )
+    })?;
+    Ok((
+        BTreeMap::from([(channel.to_string(), b)]),
+        BTreeMap::from([(channel.to_string(), feats.len())]),
+    ))
+}
+
+/// A machine's calibration from the JSON of `GET /v1/machines/{id}/calibration` (or of the
+/// `POST` that made it): its `id`, `created_at` and accepted `effects`.
+fn read_calibration(path: &std::path::Path) -> Result<MachineCalibration> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("reading the calibration {}", path.display()))?;
+    let v: serde_json::Value = serde_json::from_str(&text)
+        .with_context(|| format!("the calibration {} is not JSON", path.display()))?;
+    let field = |k: &str| -> Result<String> {
+        v[k].as_str().map(str::to_string).with_context(|| {
+            format!(
+                "the calibration {} has no `{k}`: give the JSON of GET \
+                 /v1/machines/{{id}}/calibration",
+                path.display()
+            )
+        })
+    };
+    if !v["effects"].is_array() {
+        bail!(
+            "the calibration {} has no `effects` list: give the JSON of GET \
+             /v1/machines/{{id}}/calibration",
+            path.display()
+        );
+    }
+    Ok(MachineCalibration {
+        id: field("id")?,
+        calibrated_at: field("created_at")?,
+        effects: v["effects"].clone(),
+    })
 }

@@ -109,7 +109,7 @@ pub fn run(a: GearboxArgs) -> Result<()> {
             let origin = a.gearbox.display().to_string();
             let probe = crate::gearbox::GearboxDescription::parse(&text, fmt, &origin)?;
             let id = a.id.unwrap_or_else(|| probe.name.clone());
-            if crate::service::gearboxes::check_gearbox_id(&id).is_err() {
+            if crate::service::http::check_gearbox_id(&id).is_err() {
                 bail!(
                     "a gearbox id is 1 to 64 characters of letters, digits, `.`, `_` and `-`, got `{id}`"
                 );

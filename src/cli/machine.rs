@@ -41,7 +41,7 @@ pub struct SetArgs {
 pub fn run(a: MachineArgs) -> Result<()> {
     match a.command {
         MachineCommand::Set(s) => {
-            if crate::service::records::check_machine_id(&s.id).is_err() {
+            if crate::service::http::check_machine_id(&s.id).is_err() {
                 bail!(
                     "a machine id is 1 to 64 characters of letters, digits, `.`, `_` and `-`, got `{}`",
                     s.id

@@ -15,12 +15,10 @@ use serde_json::Value;
 
 use super::AppState;
 use super::auth::Caller;
-use super::diagnoser::Input;
+use super::error::problem_from_error;
 use super::error::{ApiError, ApiResult};
-use super::records::{
-    Decoded, body_format, check_machine_id, decode, json_response, parse_query, problem_from_error,
-    read_body,
-};
+use super::http::{body_format, check_machine_id, content_decoded, json_response, read_body};
+use super::wire::{Decoded, decode, parse_query};
 use crate::keys::Scope;
 use crate::store::{CalibrationRow, new_id, now_ms};
 use crate::time::rfc3339;
@@ -82,26 +80,20 @@ async fn calibrate(
     let format = body_format(headers)?;
     let q = parse_query(query.as_deref())?;
     let bytes = read_body(headers, body_in, limits.max_body_bytes).await?;
-    let bytes = super::records::content_decoded(headers, bytes, limits.max_body_bytes)?;
+    let bytes = content_decoded(headers, bytes, limits.max_body_bytes)?;
     let dec = decode(format, &q, &bytes, limits)?;
     let samples = dec.single(q.channel.as_deref())?.to_vec();
     let Decoded {
         sample_rate_hz,
         shaft_hz,
-        sensor,
         ..
     } = dec;
-    let input = Input {
-        record: crate::record::Record {
-            samples,
-            sample_rate: sample_rate_hz,
-        },
-        shaft_hz,
-        sensor,
-        calibration: None,
+    let record = crate::record::Record {
+        samples,
+        sample_rate: sample_rate_hz,
     };
     let diag = app.diagnoser.clone();
-    let report = tokio::task::spawn_blocking(move || diag.calibrate(&input))
+    let report = tokio::task::spawn_blocking(move || diag.calibrate(&record, shaft_hz))
         .await
         .map_err(|e| ApiError::internal(format!("the calibration task failed: {e}")))?
         .map_err(|e| problem_from_error(&e))?;

@@ -242,7 +242,7 @@ pub fn serve_cmd(a: ServeArgs) -> Result<()> {
             .with_context(|| format!("opening the store {}", redact(&settings.database_url)))?;
         check_exposure(&settings.address, store.active_key_count().await?)
             .map_err(anyhow::Error::msg)?;
-        let diagnoser = super::core::load(&settings.signatures, a_allow_stale)
+        let diagnoser = super::signatures::load(&settings.signatures, a_allow_stale)
             .with_context(|| format!("loading the signature table {}", settings.signatures.display()))?;
         let listener = tokio::net::TcpListener::bind(settings.address)
             .await

@@ -160,3 +160,76 @@ impl IntoResponse for ApiError {
         r
     }
 }
+
+/// Turn a library error from decoding or diagnosing into a problem.
+pub fn problem_from_error(e: &crate::Error) -> ApiError {
+    use crate::Error as E;
+    if let (Some(ch), inner) = e.split_channel() {
+        let mut p = problem_from_error(inner);
+        p.detail = format!("channel `{ch}`: {}", p.detail);
+        return p.with("channel", ch);
+    }
+    let un = ApiError::unprocessable;
+    match e {
+        E::UnknownChannel { available, .. } => {
+            un("unknown-channel", "Unknown channel", e.to_string())
+                .with("available", json!(available))
+        }
+        E::RecordFormat { reason, .. } => ApiError::bad_request(
+            "malformed-record",
+            "Malformed record",
+            format!("the body could not be read as the stated format: {reason}"),
+        ),
+        E::EmptyRecord => un("empty-record", "Empty record", e.to_string()),
+        E::MissingSampleRate { .. } => {
+            un("missing-sample-rate", "Sample rate missing", e.to_string())
+        }
+        E::FlatRecord { samples, .. } => {
+            un("flat-record", "Flat record", e.to_string()).with("samples", *samples as u64)
+        }
+        E::ClippedRecord {
+            count, longest_run, ..
+        } => un("clipped-record", "Clipped record", e.to_string())
+            .with("clipped_samples", *count as u64)
+            .with("longest_run", *longest_run as u64),
+        E::NonFiniteSample { index, value } => un(
+            "non-finite-sample",
+            "Non-finite sample",
+            format!(
+                "sample {index} is {value}; every sample must be a finite number (check the \
+                 sensor for dropouts or saturation)"
+            ),
+        )
+        .with("index", *index as u64),
+        E::RecordTooShort {
+            samples,
+            needed_samples,
+            ..
+        } => un("record-too-short", "Record too short", e.to_string())
+            .with("samples", *samples as u64)
+            .with("needed_samples", *needed_samples as u64),
+        E::SampleRateTooLow { needed, .. } => {
+            un("sample-rate-too-low", "Sample rate too low", e.to_string())
+                .with("needed_hz", *needed)
+        }
+        E::NoMeshLine { .. } => un(
+            "no-mesh-line",
+            "No gear-mesh line found",
+            format!("{e}; give `shaft_hz` if the input-shaft speed is known"),
+        ),
+        E::SpeedOutOfBand { .. } => un(
+            "speed-out-of-band",
+            "Operating speed outside the signature table",
+            e.to_string(),
+        ),
+        E::InvalidParameter { name, .. } => {
+            un("invalid-parameter", "Invalid parameter", e.to_string())
+                .with("parameter", name.as_str())
+        }
+        E::Signal(m) => un("unusable-record", "Unusable record", m.clone()),
+        other => {
+            tracing::error!(error = %other, "diagnosis failed");
+            ApiError::internal(format!("the diagnosis failed: {other}"))
+        }
+    }
+}

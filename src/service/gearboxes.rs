@@ -31,10 +31,9 @@ use tokio::sync::watch;
 
 use super::AppState;
 use super::auth::Caller;
-use super::diagnoser::Diagnoser;
 use super::error::{ApiError, ApiResult};
-use super::read::json_with_etag;
-use super::records::{json_response, read_body};
+use super::http::{check_gearbox_id, json_response, json_with_etag, read_body};
+use crate::assessment::TableDiagnoser;
 use crate::diagnosis::DiagnoseOptions;
 use crate::gearbox::description::{GearboxDescription, MAX_DESCRIPTION_BYTES, TextFormat};
 use crate::gearbox::{Gearbox, PAPER_RIG};
@@ -51,20 +50,6 @@ pub const LEASE_MS: i64 = 30_000;
 const PROGRESS_EVERY: Duration = Duration::from_secs(1);
 /// How often an idle worker looks for a job (a PUT on this replica wakes it at once).
 const IDLE_POLL: Duration = Duration::from_secs(2);
-
-/// A gearbox id: like a machine id.
-pub fn check_gearbox_id(id: &str) -> ApiResult<()> {
-    if super::records::is_valid_id(id) {
-        Ok(())
-    } else {
-        Err(ApiError::bad_request(
-            "invalid-gearbox-id",
-            "Invalid gearbox id",
-            "a gearbox id is 1 to 64 characters of letters, digits, `.`, `_` and `-`",
-        )
-        .with("gearbox_id", id))
-    }
-}
 
 /// The stored row of a description: `(row, resolved)`.
 pub fn gearbox_row(
@@ -121,7 +106,7 @@ pub async fn ensure_builtin(app: &AppState) -> Result<(), StoreError> {
 #[derive(Default)]
 pub struct Tables {
     gearboxes: Mutex<HashMap<String, Arc<Gearbox>>>,
-    diagnosers: Mutex<HashMap<String, Arc<dyn Diagnoser>>>,
+    diagnosers: Mutex<HashMap<String, Arc<TableDiagnoser>>>,
 }
 
 impl Tables {
@@ -144,7 +129,7 @@ impl Tables {
         &self,
         app: &AppState,
         row: &GearboxRow,
-    ) -> ApiResult<Option<Arc<dyn Diagnoser>>> {
+    ) -> ApiResult<Option<Arc<TableDiagnoser>>> {
         if row.builtin {
             return Ok(Some(app.diagnoser.clone()));
         }
@@ -158,9 +143,9 @@ impl Tables {
             return Ok(None);
         };
         let origin = format!("the stored table of gearbox `{}`", row.id);
-        let d = tokio::task::spawn_blocking(move || -> crate::Result<Arc<dyn Diagnoser>> {
+        let d = tokio::task::spawn_blocking(move || -> crate::Result<Arc<TableDiagnoser>> {
             let table = SignatureTable::from_json(&text, &origin)?;
-            Ok(Arc::new(super::core::TableDiagnoser::new(
+            Ok(Arc::new(TableDiagnoser::new(
                 table,
                 DiagnoseOptions::default(),
             )?))

@@ -24,11 +24,10 @@ use serde_json::{Value, json};
 
 use super::AppState;
 use super::auth::Caller;
-use super::diagnoser::Diagnoser;
 use super::error::{ApiError, ApiResult};
-use super::gearboxes::{BUILTIN_ID, check_gearbox_id};
-use super::read::json_with_etag;
-use super::records::{check_machine_id, read_body};
+use super::gearboxes::BUILTIN_ID;
+use super::http::{check_gearbox_id, check_machine_id, json_with_etag, read_body};
+use crate::assessment::{GearboxRef, TableDiagnoser};
 use crate::gearbox::Gearbox;
 use crate::keys::Scope;
 use crate::novelty::{MIN_BASELINE_RECORDS, MachineBaseline, RecordFeatures};
@@ -44,7 +43,7 @@ pub struct MachineContext {
     pub gearbox_row: GearboxRow,
     pub gearbox: Arc<Gearbox>,
     /// The diagnoser of the gearbox's table; `None` while the table is not ready.
-    pub diagnoser: Option<Arc<dyn Diagnoser>>,
+    pub diagnoser: Option<Arc<TableDiagnoser>>,
 }
 
 impl MachineContext {
@@ -71,14 +70,14 @@ impl MachineContext {
     }
 
     /// The `gearbox` object of a diagnosis.
-    pub fn json(&self) -> Value {
-        json!({
-            "id": self.gearbox_row.id,
-            "name": self.gearbox_row.name,
-            "hash": self.gearbox_row.hash,
-            "table_status": self.gearbox_row.status,
-            "table_progress": self.gearbox_row.progress,
-        })
+    pub fn gearbox_ref(&self) -> GearboxRef {
+        GearboxRef {
+            id: self.gearbox_row.id.clone(),
+            name: self.gearbox_row.name.clone(),
+            hash: self.gearbox_row.hash.clone(),
+            table_status: self.gearbox_row.status.clone(),
+            table_progress: self.gearbox_row.progress,
+        }
     }
 
     pub fn input_shaft_hz(&self) -> Option<f64> {

@@ -21,26 +21,26 @@ use tokio::net::TcpListener;
 use tokio::sync::{Notify, watch};
 use tower_http::trace::TraceLayer;
 
-pub mod assess;
 pub mod auth;
 pub mod calibration;
 pub mod cli;
-pub mod core;
 pub mod dashboard;
-pub mod diagnoser;
 pub mod error;
 pub mod gearboxes;
 pub mod health;
+pub mod http;
 pub mod machines;
 pub mod metrics;
 pub mod read;
 pub mod records;
+pub mod signatures;
 pub mod spectrum;
 pub mod webhooks;
+pub mod wire;
 
+pub use crate::assessment::TableDiagnoser;
 use crate::configuration::Settings;
 use crate::store::Store;
-pub use diagnoser::Diagnoser;
 pub use error::ApiError;
 
 /// Shared state of every handler (cheap to clone).
@@ -52,7 +52,7 @@ pub struct Inner {
     pub store: Arc<dyn Store>,
     /// Group commit of accepted records (one writer, one transaction per batch).
     pub ingest_queue: crate::store::queue::IngestQueue,
-    pub diagnoser: Arc<dyn Diagnoser>,
+    pub diagnoser: Arc<TableDiagnoser>,
     pub metrics: metrics::Metrics,
     pub limiter: auth::RateLimiter,
     pub webhook_wake: Notify,
@@ -76,7 +76,7 @@ impl std::ops::Deref for AppState {
 const INGEST_BATCH: usize = 32;
 
 impl AppState {
-    pub fn new(settings: Settings, store: Arc<dyn Store>, diagnoser: Arc<dyn Diagnoser>) -> Self {
+    pub fn new(settings: Settings, store: Arc<dyn Store>, diagnoser: Arc<TableDiagnoser>) -> Self {
         let limiter =
             auth::RateLimiter::new(settings.limits.rate_per_second, settings.limits.rate_burst);
         let http = reqwest::Client::builder()

@@ -1,51 +1,21 @@
 //! Read endpoints: machines, their diagnoses (cursor pagination, ETag/304), one diagnosis.
 
 use axum::extract::{Path, RawQuery, State};
-use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
-use axum::response::{IntoResponse, Response};
+use axum::http::HeaderMap;
+use axum::response::Response;
 use serde::Deserialize;
 use serde_json::{Value, json};
-use sha2::{Digest, Sha256};
 
 use super::AppState;
 use super::auth::Caller;
 use super::error::{ApiError, ApiResult};
 use super::gearboxes::BUILTIN_ID;
-use super::records::check_machine_id;
+use super::http::{check_machine_id, json_with_etag};
 use crate::store::{DiagnosisRow, MachineRow, novelty_json, wear_json};
 use crate::time::{parse_rfc3339, rfc3339};
 
 /// How many diagnoses the machine view's wear trend shows.
 const TREND_POINTS: i64 = 200;
-
-/// JSON with a strong ETag over the body; 304 when `If-None-Match` matches.
-pub fn json_with_etag(headers: &HeaderMap, body: &Value) -> Response {
-    let text = body.to_string();
-    let tag = format!(
-        "\"{}\"",
-        &hex::encode(Sha256::digest(text.as_bytes()))[..32]
-    );
-    let matches = headers
-        .get(header::IF_NONE_MATCH)
-        .and_then(|v| v.to_str().ok())
-        .is_some_and(|v| v.split(',').any(|t| t.trim() == tag || t.trim() == "*"));
-    let mut r = if matches {
-        StatusCode::NOT_MODIFIED.into_response()
-    } else {
-        let mut r = (StatusCode::OK, text).into_response();
-        r.headers_mut().insert(
-            header::CONTENT_TYPE,
-            HeaderValue::from_static("application/json"),
-        );
-        r
-    };
-    if let Ok(v) = HeaderValue::from_str(&tag) {
-        r.headers_mut().insert(header::ETAG, v);
-    }
-    r.headers_mut()
-        .insert(header::CACHE_CONTROL, HeaderValue::from_static("no-cache"));
-    r
-}
 
 fn machine_summary(m: &MachineRow) -> Value {
     json!({

@@ -23,7 +23,7 @@ use tokio::sync::watch;
 use super::AppState;
 use super::auth::Caller;
 use super::error::{ApiError, ApiResult};
-use super::records::read_body;
+use super::http::read_body;
 use crate::keys::{self, Scope};
 use crate::store::{AttemptRow, DeliveryRow, Outcome, WebhookRow, new_id, now_ms};
 use crate::time::rfc3339;

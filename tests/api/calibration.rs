@@ -31,7 +31,7 @@ fn model() -> &'static Gearbox {
 }
 
 /// A 0.6 s, 16 kHz virtual-rig record with shaft-rate modulation (eccentricity 0.1 b).
-fn eccentric_record(seed: u64) -> (Vec<f64>, f64) {
+pub fn eccentric_record(seed: u64) -> (Vec<f64>, f64) {
     let spec = RigSpec {
         ea: EA,
         omega1: 1.0,

@@ -4,9 +4,9 @@ use std::f64::consts::TAU;
 use std::path::PathBuf;
 use std::sync::{Arc, OnceLock};
 
+use gearwear::assessment::TableDiagnoser;
 use gearwear::configuration::Settings;
 use gearwear::keys::Scope;
-use gearwear::service::core::TableDiagnoser;
 use gearwear::service::{AppState, serve};
 use gearwear::store::{self, Store};
 use serde_json::Value;
@@ -57,8 +57,11 @@ pub fn diagnoser() -> Arc<TableDiagnoser> {
     static D: OnceLock<Arc<TableDiagnoser>> = OnceLock::new();
     D.get_or_init(|| {
         Arc::new(
-            gearwear::service::core::load(&gearwear::configuration::default_signatures(), true)
-                .expect("the committed signature table loads"),
+            gearwear::service::signatures::load(
+                &gearwear::configuration::default_signatures(),
+                true,
+            )
+            .expect("the committed signature table loads"),
         )
     })
     .clone()

@@ -4,6 +4,7 @@
 mod helpers;
 
 mod api;
+mod assessment;
 mod bad_records;
 mod browser;
 mod calibration;

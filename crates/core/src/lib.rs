@@ -29,6 +29,7 @@
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod analysis;
+pub mod assessment;
 pub mod closed_loop;
 pub mod diagnosis;
 pub mod error;

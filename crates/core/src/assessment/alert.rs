@@ -1,6 +1,6 @@
-//! What one record means for its machine: each channel diagnosed with the machine's gearbox
-//! (when its table is ready), scored against the machine's baseline (when it has one), and an
-//! alert level from both.
+//! The alert policy: a channel's alert level from its wear degree (when the model fits) and
+//! its novelty against the machine's baseline (when it has one), and the channel that decides
+//! a record's level.
 //!
 //! # Alert levels
 //! * The **wear** level (`ok` / `warning` / `alarm` by the configured ea thresholds) counts only
@@ -23,11 +23,39 @@
 //!   is named as the one that decides.
 
 use serde::Serialize;
-use serde_json::{Value, json};
 
-use super::diagnoser::Output;
-use crate::configuration::Thresholds;
-use crate::novelty::{Novelty, RecordFeatures};
+use super::ChannelAssessment;
+use crate::novelty::Novelty;
+
+/// Wear-degree thresholds (ea, units of the backlash b) that set a machine's alert level:
+/// `ok` below `warning`, `warning` below `alarm`, then `alarm`.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Thresholds {
+    pub warning: f64,
+    pub alarm: f64,
+}
+
+impl Default for Thresholds {
+    /// The service's default levels (`gearwear serve --warning-ea 0.5 --alarm-ea 0.8`).
+    fn default() -> Self {
+        Thresholds {
+            warning: 0.5,
+            alarm: 0.8,
+        }
+    }
+}
+
+impl Thresholds {
+    pub fn level(&self, ea: f64) -> &'static str {
+        if ea >= self.alarm {
+            "alarm"
+        } else if ea >= self.warning {
+            "warning"
+        } else {
+            "ok"
+        }
+    }
+}
 
 /// A channel's (or a record's) alert.
 #[derive(Debug, Clone, Serialize, PartialEq)]
@@ -154,44 +182,9 @@ pub fn alert(
     }
 }
 
-/// One channel of a record, analysed.
-#[derive(Debug, Clone)]
-pub struct ChannelResult {
-    pub name: String,
-    /// The table's diagnosis, when the gearbox's table is ready.
-    pub output: Option<Output>,
-    pub features: RecordFeatures,
-    pub novelty: Option<Novelty>,
-    pub alert: Alert,
-}
-
-impl ChannelResult {
-    /// `(estimate, poor_fit, chi2_per_feature)` of the diagnosis.
-    pub fn wear(o: &Output) -> (f64, bool, f64) {
-        let fit = &o.diagnosis["fit"];
-        (
-            o.ea_estimate,
-            fit["inflated"].as_bool().unwrap_or(false),
-            fit["chi2_per_feature"].as_f64().unwrap_or(f64::NAN),
-        )
-    }
-
-    /// The summary of this channel in a record's answer.
-    pub fn summary(&self) -> Value {
-        json!({
-            "name": self.name,
-            "alert_level": self.alert.level,
-            "alert": self.alert,
-            "wear_degree": self.output.as_ref().map(|o| o.diagnosis["wear_degree"].clone()),
-            "fit": self.output.as_ref().map(|o| o.diagnosis["fit"].clone()),
-            "novelty": self.novelty,
-        })
-    }
-}
-
 /// Index of the channel that decides the record's alert.
-pub fn deciding(results: &[ChannelResult]) -> usize {
-    let ratio = |r: &ChannelResult| {
+pub fn deciding(results: &[ChannelAssessment]) -> usize {
+    let ratio = |r: &ChannelAssessment| {
         r.novelty
             .as_ref()
             .map(|n| n.score / n.threshold.max(f64::MIN_POSITIVE))
@@ -211,7 +204,7 @@ pub fn deciding(results: &[ChannelResult]) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::novelty::FeatureZ;
+    use crate::novelty::{FeatureZ, RecordFeatures};
 
     const TH: Thresholds = Thresholds {
         warning: 0.5,
@@ -294,12 +287,12 @@ mod tests {
 
     #[test]
     fn the_most_severe_channel_decides() {
-        let ch = |name: &str, level: &'static str, score: f64| ChannelResult {
+        let ch = |name: &str, level: &'static str, score: f64| ChannelAssessment {
             name: name.into(),
-            output: None,
+            reading: None,
             features: RecordFeatures {
                 values: Default::default(),
-                indicators: Value::Null,
+                indicators: serde_json::Value::Null,
                 group: None,
             },
             novelty: Some(nov(score)),

@@ -1,0 +1,351 @@
+//! The record wire format: the body formats the record endpoints take, the query parameters
+//! that go with them, and [`decode`] — body bytes to a validated [`Decoded`] record, or the
+//! problem a client is answered with.
+
+pub mod json;
+
+use axum::http::StatusCode;
+use serde::Deserialize;
+
+pub use json::{JsonRecord, fast_json_record};
+
+use super::error::{ApiError, ApiResult, problem_from_error};
+
+/// Body formats the endpoint takes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BodyFormat {
+    Json,
+    Csv,
+    F32,
+    Wav,
+}
+
+impl BodyFormat {
+    pub fn from_content_type(ct: &str) -> Option<BodyFormat> {
+        let mime = ct
+            .split(';')
+            .next()
+            .unwrap_or("")
+            .trim()
+            .to_ascii_lowercase();
+        match mime.as_str() {
+            "application/json" => Some(BodyFormat::Json),
+            "text/csv" => Some(BodyFormat::Csv),
+            "application/octet-stream" => Some(BodyFormat::F32),
+            "audio/wav" | "audio/x-wav" | "audio/wave" | "audio/vnd.wave" => Some(BodyFormat::Wav),
+            _ => None,
+        }
+    }
+
+    pub fn mime(self) -> &'static str {
+        match self {
+            BodyFormat::Json => "application/json",
+            BodyFormat::Csv => "text/csv",
+            BodyFormat::F32 => "application/octet-stream",
+            BodyFormat::Wav => "audio/wav",
+        }
+    }
+}
+
+/// Query parameters (for the non-JSON bodies; `shaft_hz`, `recorded_at`, `sensor` also with
+/// JSON, where the body wins).
+#[derive(Debug, Default, Deserialize)]
+pub struct RecordQuery {
+    sample_rate_hz: Option<String>,
+    shaft_hz: Option<String>,
+    recorded_at: Option<String>,
+    sensor: Option<String>,
+    /// Diagnose only this channel of a multichannel record (a name or a 0-based index).
+    pub channel: Option<String>,
+    /// `true`: the record is healthy, part of the machine's baseline.
+    baseline: Option<String>,
+}
+
+impl RecordQuery {
+    /// The `baseline` flag.
+    pub fn baseline(&self) -> ApiResult<bool> {
+        match self.baseline.as_deref() {
+            None | Some("false") | Some("0") => Ok(false),
+            Some("true") | Some("1") => Ok(true),
+            Some(other) => Err(ApiError::bad_request(
+                "invalid-query",
+                "Invalid query parameter",
+                format!("`baseline` is `true` or `false`, got `{other}`"),
+            )
+            .with("parameter", "baseline")),
+        }
+    }
+}
+
+fn parse_number(name: &'static str, v: &Option<String>) -> ApiResult<Option<f64>> {
+    match v {
+        None => Ok(None),
+        Some(s) => match s.trim().parse::<f64>() {
+            Ok(x) if x.is_finite() => Ok(Some(x)),
+            _ => Err(ApiError::bad_request(
+                "invalid-query",
+                "Invalid query parameter",
+                format!("query parameter `{name}` must be a finite number, got `{s}`"),
+            )
+            .with("parameter", name)),
+        },
+    }
+}
+
+/// Decode a non-JSON body into samples with the record module's parsers (the same as
+/// `gearwear diagnose` uses for files).
+fn decode_binary(
+    format: BodyFormat,
+    bytes: &[u8],
+    sample_rate: Option<f64>,
+) -> ApiResult<(Channels, f64)> {
+    use crate::record::{Format, ReadOptions, parse_record_channels};
+    let f = match format {
+        BodyFormat::Csv => Format::Csv,
+        BodyFormat::F32 => Format::F32,
+        BodyFormat::Wav => Format::Wav,
+        BodyFormat::Json => unreachable!("JSON is decoded by serde"),
+    };
+    let opts = ReadOptions {
+        format: Some(f),
+        sample_rate,
+        column: None,
+    };
+    let r = parse_record_channels(bytes, f, &opts, "body").map_err(|e| {
+        let mut p = problem_from_error(&e);
+        // The parsers speak CLI; a web client sets a query parameter.
+        p.detail = p
+            .detail
+            .replace("--sample-rate HZ", "`?sample_rate_hz=…`")
+            .replace("--sample-rate", "`?sample_rate_hz=…`")
+            .replace(
+                "give the sample rate in Hz",
+                "give it (`?sample_rate_hz=…`)",
+            )
+            .replace("give the sample rate", "give `?sample_rate_hz=…`");
+        p
+    })?;
+    Ok((
+        r.channels
+            .into_iter()
+            .map(|c| (c.name, c.samples))
+            .collect(),
+        r.sample_rate,
+    ))
+}
+
+/// The record query parameters (`sample_rate_hz`, `shaft_hz`, `recorded_at`, `sensor`).
+pub fn parse_query(query: Option<&str>) -> ApiResult<RecordQuery> {
+    serde_urlencoded::from_str(query.unwrap_or("")).map_err(|e| {
+        ApiError::bad_request("invalid-query", "Invalid query parameter", e.to_string())
+    })
+}
+
+/// `(name, samples)` of each channel of a record.
+pub type Channels = Vec<(String, Vec<f64>)>;
+
+/// A decoded, validated record and what the request said about it.
+#[derive(Debug, Clone)]
+pub struct Decoded {
+    /// `(name, samples)` of each channel; a single-channel record's one is named `"0"`.
+    pub channels: Channels,
+    pub sample_rate_hz: f64,
+    pub shaft_hz: Option<f64>,
+    pub recorded_at: Option<String>,
+    pub sensor: Option<String>,
+}
+
+fn too_many_samples(samples: usize, limit: usize) -> ApiError {
+    ApiError::new(
+        StatusCode::PAYLOAD_TOO_LARGE,
+        "too-many-samples",
+        "Record too long",
+        format!(
+            "the record has {samples} samples; the limit is {limit} — split it into shorter records"
+        ),
+    )
+    .with("limit_samples", limit as u64)
+    .with("samples", samples as u64)
+}
+
+impl Decoded {
+    /// The channels to diagnose: the `channel` query parameter's (by name or 0-based index),
+    /// else those the machine lists, else all.
+    pub fn select(
+        &self,
+        wanted: Option<&str>,
+        machine: Option<&[String]>,
+    ) -> ApiResult<Vec<usize>> {
+        let names = || {
+            self.channels
+                .iter()
+                .map(|(n, _)| format!("`{n}`"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        if let Some(w) = wanted {
+            let by_name = self.channels.iter().position(|(n, _)| n == w);
+            let by_index = w.parse::<usize>().ok().filter(|i| *i < self.channels.len());
+            return match by_name.or(by_index) {
+                Some(i) => Ok(vec![i]),
+                None => Err(ApiError::unprocessable(
+                    "unknown-channel",
+                    "Unknown channel",
+                    format!(
+                        "the record has no channel `{w}`; its channels are {} (name or 0-based index \
+                         in the `channel` query parameter)",
+                        names()
+                    ),
+                )
+                .with("channel", w)),
+            };
+        }
+        if let Some(list) = machine {
+            let picked: Vec<usize> = (0..self.channels.len())
+                .filter(|i| list.contains(&self.channels[*i].0))
+                .collect();
+            if picked.is_empty() && self.channels.len() > 1 {
+                return Err(ApiError::unprocessable(
+                    "unknown-channel",
+                    "Unknown channel",
+                    format!(
+                        "none of the record's channels ({}) is one the machine records ({}); \
+                         name one with the `channel` query parameter or update the machine's \
+                         `channels`",
+                        names(),
+                        list.join(", ")
+                    ),
+                ));
+            }
+            if !picked.is_empty() {
+                return Ok(picked);
+            }
+        }
+        Ok((0..self.channels.len()).collect())
+    }
+
+    /// The one channel of a record an endpoint needs one of: the `channel` query parameter's,
+    /// or the only one.
+    pub fn single(&self, wanted: Option<&str>) -> ApiResult<&[f64]> {
+        if wanted.is_none() && self.channels.len() > 1 {
+            return Err(ApiError::unprocessable(
+                "several-channels",
+                "Several channels",
+                format!(
+                    "the record has {} channels ({}); choose one with the `channel` query parameter",
+                    self.channels.len(),
+                    self.channels
+                        .iter()
+                        .map(|(n, _)| n.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            ));
+        }
+        let i = self.select(wanted, None)?[0];
+        Ok(&self.channels[i].1)
+    }
+}
+
+/// Decode and validate a record body of `format` (JSON body fields win over the query),
+/// the same for every endpoint that takes a record.
+pub fn decode(
+    format: BodyFormat,
+    q: &RecordQuery,
+    bytes: &[u8],
+    limits: &crate::configuration::Limits,
+) -> ApiResult<Decoded> {
+    let mut shaft = parse_number("shaft_hz", &q.shaft_hz)?;
+    let mut recorded_at = q.recorded_at.clone();
+    let mut sensor = q.sensor.clone();
+    let (channels, fs) = match format {
+        BodyFormat::Json => {
+            let mut r = JsonRecord::from_json(bytes).map_err(|e| {
+                let hint = if bytes.windows(3).any(|w| w == b"NaN") || bytes.windows(8).any(|w| w == b"Infinity") {
+                    " (JSON has no NaN or Infinity: every sample must be a finite number)"
+                } else {
+                    ""
+                };
+                ApiError::bad_request(
+                    "invalid-json",
+                    "Malformed JSON record",
+                    format!(
+                        "the body is not a valid record: {e}{hint}; expected \
+                         {{\"sample_rate_hz\": number, \"samples\": [numbers] or \"channels\": {{name: [numbers]}}, \"shaft_hz\"?: number, \
+                         \"recorded_at\"?: RFC 3339 string, \"sensor\"?: string}}"
+                    ),
+                )
+            })?;
+            if r.shaft_hz.is_some() {
+                shaft = r.shaft_hz;
+            }
+            if r.recorded_at.is_some() {
+                recorded_at = r.recorded_at.take();
+            }
+            if r.sensor.is_some() {
+                sensor = r.sensor.take();
+            }
+            let fs = r.sample_rate_hz;
+            let chans = r.into_channels();
+            (
+                chans
+                    .into_iter()
+                    .map(|c| (c.name, c.samples))
+                    .collect::<Vec<_>>(),
+                fs,
+            )
+        }
+        BodyFormat::F32 if bytes.len() / 4 > limits.max_samples => {
+            // Refused before decoding: no vector of more samples than allowed is built.
+            return Err(too_many_samples(bytes.len() / 4, limits.max_samples));
+        }
+        f => decode_binary(f, bytes, parse_number("sample_rate_hz", &q.sample_rate_hz)?)?,
+    };
+    if let Some(t) = &recorded_at
+        && crate::time::parse_rfc3339(t).is_none()
+    {
+        return Err(ApiError::bad_request(
+            "invalid-recorded-at",
+            "Invalid recorded_at",
+            format!(
+                "`recorded_at` must be an RFC 3339 timestamp such as 2026-11-22T08:30:00Z, got `{t}`"
+            ),
+        ));
+    }
+    if let Some(s) = &sensor
+        && s.len() > 200
+    {
+        return Err(ApiError::bad_request(
+            "invalid-sensor",
+            "Invalid sensor",
+            "`sensor` is at most 200 characters",
+        ));
+    }
+    let total: usize = channels.iter().map(|c| c.1.len()).sum();
+    if total > limits.max_samples {
+        return Err(too_many_samples(total, limits.max_samples));
+    }
+    // Empty, NaN/±∞, flat or clipped samples and an impossible rate: the library's checks
+    // (the binary formats already passed them in `parse_record_channels`; a JSON body has
+    // not). A multichannel record's error names its channel.
+    if format == BodyFormat::Json {
+        for (name, x) in &channels {
+            let r = crate::record::check_signal(x);
+            let r = if channels.len() > 1 {
+                r.map_err(|e| e.in_channel(name.clone()))
+            } else {
+                r
+            };
+            r.map_err(|e| problem_from_error(&e))?;
+        }
+        crate::record::check_sample_rate(fs).map_err(|e| problem_from_error(&e))?;
+    }
+
+    Ok(Decoded {
+        channels,
+        sample_rate_hz: fs,
+        shaft_hz: shaft,
+        recorded_at,
+        sensor,
+    })
+}
