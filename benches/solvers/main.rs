@@ -30,6 +30,7 @@ mod de;
 mod os;
 mod ours;
 mod problem;
+mod solver;
 
 #[path = "../../crates/core/tests/support/one_mesh.rs"]
 mod one_mesh;
@@ -40,7 +41,8 @@ use std::time::Instant;
 
 use gearwear::model::Wear;
 
-use crate::problem::{DeMode, Problem, Run, Solver};
+use crate::problem::{DeMode, Problem, Run};
+use crate::solver::Solver;
 use one_mesh::{OneMesh, one_mesh_assembly};
 
 /// Repetitions for the timings (median reported).

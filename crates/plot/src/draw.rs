@@ -8,8 +8,11 @@ use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use crate::chart::{Chart, Fonts, Layer, Pt};
 use crate::font::FONT;
-use crate::render::DrawResult;
 use crate::ticks::{log_tick, tick_formatter};
+
+/// What drawing into a plotters area returns: plotters' errors are boxed, and turned into
+/// [`gearwear_core::Error::Plot`] with the file's path where the figure is written.
+pub(crate) type DrawResult = std::result::Result<(), Box<dyn std::error::Error>>;
 
 /// The axes of one chart: x is linear, y linear or logarithmic (`Y`).
 type Axes<'a, DB, Y> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, Y>>;

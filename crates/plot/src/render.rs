@@ -9,10 +9,8 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use crate::chart::{Chart, Fonts, ranges};
-use crate::draw::fill_chart;
+use crate::draw::{DrawResult, fill_chart};
 use crate::font::{FONT, ensure_font};
-
-pub(crate) type DrawResult = std::result::Result<(), Box<dyn StdError>>;
 
 enum Format {
     Png,

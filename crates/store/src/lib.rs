@@ -23,6 +23,58 @@ use std::sync::Arc;
 
 use async_trait::async_trait;
 
+/// What each backend module (`sqlite.rs`, `postgres.rs`) declares after its connection code:
+/// the [`Store`] impl (`kind`, `ping`, `close`) for `$store`, and one module per resource
+/// holding that resource's SQL instantiated for the sqlx database `$db`.
+macro_rules! backend {
+    ($store:ident, $db:ty, $kind:literal) => {
+        #[async_trait::async_trait]
+        impl $crate::Store for $store {
+            fn kind(&self) -> &'static str {
+                $kind
+            }
+
+            async fn ping(&self) -> $crate::StoreResult<()> {
+                sqlx::query("SELECT 1").execute(&self.pool).await?;
+                Ok(())
+            }
+
+            async fn close(&self) {
+                self.pool.close().await;
+            }
+        }
+
+        mod keys {
+            $crate::keys::keys_sql!($store, $db);
+        }
+        mod ingest {
+            $crate::ingest::ingest_sql!($store, $db);
+        }
+        mod diagnoses {
+            $crate::diagnoses::diagnoses_sql!($store, $db);
+        }
+        mod machines {
+            $crate::machines::machines_sql!($store, $db);
+        }
+        mod webhooks {
+            $crate::webhooks::webhooks_sql!($store, $db);
+        }
+        mod retention {
+            $crate::retention::retention_sql!($store, $db);
+        }
+        mod calibration {
+            $crate::calibration::calibration_sql!($store, $db);
+        }
+        mod gearboxes {
+            $crate::gearboxes::gearboxes_sql!($store, $db);
+        }
+        mod baselines {
+            $crate::baselines::baselines_sql!($store, $db);
+        }
+    };
+}
+pub(crate) use backend;
+
 pub mod baselines;
 pub mod calibration;
 pub mod diagnoses;

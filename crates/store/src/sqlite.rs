@@ -35,50 +35,7 @@ impl SqliteStore {
     }
 }
 
-#[async_trait::async_trait]
-impl super::Store for SqliteStore {
-    fn kind(&self) -> &'static str {
-        "sqlite"
-    }
-
-    async fn ping(&self) -> super::StoreResult<()> {
-        sqlx::query("SELECT 1").execute(&self.pool).await?;
-        Ok(())
-    }
-
-    async fn close(&self) {
-        self.pool.close().await;
-    }
-}
-
-// The SQL of each resource on this backend, one module each.
-mod keys {
-    crate::keys::keys_sql!(SqliteStore, sqlx::Sqlite);
-}
-mod ingest {
-    crate::ingest::ingest_sql!(SqliteStore, sqlx::Sqlite);
-}
-mod diagnoses {
-    crate::diagnoses::diagnoses_sql!(SqliteStore, sqlx::Sqlite);
-}
-mod machines {
-    crate::machines::machines_sql!(SqliteStore, sqlx::Sqlite);
-}
-mod webhooks {
-    crate::webhooks::webhooks_sql!(SqliteStore, sqlx::Sqlite);
-}
-mod retention {
-    crate::retention::retention_sql!(SqliteStore, sqlx::Sqlite);
-}
-mod calibration {
-    crate::calibration::calibration_sql!(SqliteStore, sqlx::Sqlite);
-}
-mod gearboxes {
-    crate::gearboxes::gearboxes_sql!(SqliteStore, sqlx::Sqlite);
-}
-mod baselines {
-    crate::baselines::baselines_sql!(SqliteStore, sqlx::Sqlite);
-}
+crate::backend!(SqliteStore, sqlx::Sqlite, "sqlite");
 
 #[cfg(test)]
 mod tests {

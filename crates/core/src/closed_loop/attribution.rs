@@ -19,12 +19,15 @@ use super::effects::{
 use super::fit::{Weights, fit_sensor, sensor_model};
 use super::measured::Measured;
 use super::scoring::Scores;
-use super::selection::SUPPORT_SHARE;
 use super::sidebands::{SidebandCheck, refusal};
 use super::simulator::Simulator;
 use super::spectrum::{self, grid_index};
 use crate::diagnosis::Diagnosis;
 use crate::error::Result;
+
+/// Share of a candidate's improvement that must fall on its fingerprint (see
+/// [`calibrate`](super::calibrate)).
+pub const SUPPORT_SHARE: f64 = 0.25;
 
 /// The sideband orders `k` (`l ± k s` around every line `l`) a shaft modulation's fingerprint
 /// covers.

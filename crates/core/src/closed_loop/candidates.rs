@@ -6,8 +6,8 @@
 
 use super::SensorFit;
 use super::effects::{
-    Effect, ElementParams, MeshGear, PATH_RESONANCE, Resonance, SHAFT_MODULATION, effect_resonance,
-    element_effects, reference_gears, shaft_ratio,
+    Effect, ElementParams, Mesh, MeshGear, PATH_RESONANCE, Resonance, SHAFT_MODULATION,
+    effect_resonance, element_effects, reference_gears, shaft_ratio,
 };
 use super::elements::ElementFit;
 use super::fit::{Weights, fit_sensor, search_resonance};
@@ -31,39 +31,6 @@ pub(super) struct Fitted {
     pub rss: f64,
     /// Fitted parameters k (gain, noise, ea, plus the effects').
     pub k: usize,
-}
-
-/// The shafts and gears the element effects may sit on.
-pub(super) struct Mesh {
-    /// The reference mesh's two gears ([`reference_gears`]).
-    pub gears: Vec<MeshGear>,
-    /// The input shaft's pinion: where a shaft modulation of no other shaft sits.
-    pub input: MeshGear,
-    /// The input shaft, then the reference mesh's shafts other than it.
-    pub shafts: Vec<MeshGear>,
-}
-
-impl Mesh {
-    pub(super) fn new(gb: &Gearbox) -> Mesh {
-        let gears = reference_gears(gb);
-        let input = MeshGear {
-            member: "pinion",
-            shaft: gb.description.input_shaft.clone(),
-            teeth: (1.0 / shaft_ratio(gb)).round() as u32,
-            shaft_ratio: shaft_ratio(gb),
-        };
-        let mut shafts: Vec<MeshGear> = vec![input.clone()];
-        for g in &gears {
-            if (g.shaft_ratio - input.shaft_ratio).abs() > 1e-9 {
-                shafts.push(g.clone());
-            }
-        }
-        Mesh {
-            gears,
-            input,
-            shafts,
-        }
-    }
 }
 
 /// Every candidate of the selection and what they were fitted against.

@@ -351,3 +351,36 @@ mod tests {
         assert!(plain.tooth_damage.iter().all(Option::is_none));
     }
 }
+
+/// The shafts and gears the element effects may sit on.
+pub(super) struct Mesh {
+    /// The reference mesh's two gears ([`reference_gears`]).
+    pub gears: Vec<MeshGear>,
+    /// The input shaft's pinion: where a shaft modulation of no other shaft sits.
+    pub input: MeshGear,
+    /// The input shaft, then the reference mesh's shafts other than it.
+    pub shafts: Vec<MeshGear>,
+}
+
+impl Mesh {
+    pub(super) fn new(gb: &Gearbox) -> Mesh {
+        let gears = reference_gears(gb);
+        let input = MeshGear {
+            member: "pinion",
+            shaft: gb.description.input_shaft.clone(),
+            teeth: (1.0 / shaft_ratio(gb)).round() as u32,
+            shaft_ratio: shaft_ratio(gb),
+        };
+        let mut shafts: Vec<MeshGear> = vec![input.clone()];
+        for g in &gears {
+            if (g.shaft_ratio - input.shaft_ratio).abs() > 1e-9 {
+                shafts.push(g.clone());
+            }
+        }
+        Mesh {
+            gears,
+            input,
+            shafts,
+        }
+    }
+}

@@ -6,8 +6,7 @@
 
 use rayon::prelude::*;
 
-use super::candidates::Mesh;
-use super::effects::{ElementParams, PLANETARY_WEAR, SHAFT_MODULATION, TOOTH_DAMAGE};
+use super::effects::{ElementParams, Mesh, PLANETARY_WEAR, SHAFT_MODULATION, TOOTH_DAMAGE};
 use super::fit::{Weights, fit_sensor, sensor_model};
 use super::measured::Measured;
 use super::residual::fingerprint_gap;

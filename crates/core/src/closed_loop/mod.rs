@@ -85,6 +85,7 @@ mod scoring;
 mod selection;
 mod simulator;
 
+pub use attribution::SUPPORT_SHARE;
 pub use attribution::{
     BAND_IMPROVED_FRACTION, BAND_MIN_POINTS, BandEvidence, MIN_COLOURED_LINES, TOOTH_TSA_FM4,
 };
@@ -92,8 +93,7 @@ pub use options::CalibrateOptions;
 pub use refit::{HeldRefit, refit_held};
 pub use report::{CalibrationReport, Candidate, ResidualFeature, SensorFit, Spectra, WearEstimate};
 pub use selection::{
-    BAND_MARGIN_FACTOR, SM_SIDEBAND_MARGIN_FACTOR, SM_SIDEBAND_PROMINENCE_DB, SUPPORT_SHARE,
-    TOOTH_MARGIN_FACTOR,
+    BAND_MARGIN_FACTOR, SM_SIDEBAND_MARGIN_FACTOR, SM_SIDEBAND_PROMINENCE_DB, TOOTH_MARGIN_FACTOR,
 };
 
 use crate::error::Result;

@@ -8,16 +8,12 @@
 //! ([`Selection::choose`]).
 
 use super::Candidate;
-use super::attribution::{Attribution, BandEvidence};
+use super::attribution::{Attribution, BandEvidence, SUPPORT_SHARE};
 use super::candidates::{Candidates, Fitted};
 use super::effects::{Effect, PATH_RESONANCE, SHAFT_MODULATION, TOOTH_DAMAGE};
 use super::measured::Measured;
 use super::scoring::Scores;
 use super::sidebands::SidebandCheck;
-
-/// Share of a candidate's improvement that must fall on its fingerprint (see
-/// [`calibrate`](super::calibrate)).
-pub const SUPPORT_SHARE: f64 = 0.25;
 
 /// Shaft modulation is also eligible below [`SUPPORT_SHARE`] where the record's strongest
 /// sidebands are at its shaft's rate and stand this far (dB) above the scanned window's median
