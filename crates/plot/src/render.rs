@@ -1,6 +1,5 @@
 //! Rendering charts into a PNG or SVG file: the format, the grid of panels, the axes.
 
-use std::error::Error as StdError;
 use std::path::Path;
 
 use gearwear_core::{Error, Result};

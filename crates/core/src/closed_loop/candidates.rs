@@ -6,8 +6,8 @@
 
 use super::SensorFit;
 use super::effects::{
-    Effect, ElementParams, Mesh, MeshGear, PATH_RESONANCE, Resonance, SHAFT_MODULATION,
-    effect_resonance, element_effects, reference_gears, shaft_ratio,
+    Effect, ElementParams, Mesh, PATH_RESONANCE, Resonance, SHAFT_MODULATION, effect_resonance,
+    element_effects,
 };
 use super::elements::ElementFit;
 use super::fit::{Weights, fit_sensor, search_resonance};
@@ -17,7 +17,6 @@ use super::sidebands::{SidebandCheck, SidebandScan, refuses};
 use super::simulator::{Simulator, best_point};
 use super::spectrum;
 use crate::error::Result;
-use crate::gearbox::Gearbox;
 
 /// A candidate model fitted to the record.
 pub(super) struct Fitted {

@@ -323,35 +323,6 @@ pub(crate) fn element_effects(
     v
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn tooth_damage_enters_the_reference_mesh_once_per_revolution() {
-        let gb = Gearbox::paper_rig();
-        let gears = reference_gears(&gb);
-        assert_eq!(gears.len(), 2);
-        let pinion = &gears[0];
-        let p = ElementParams {
-            tooth_depth: 0.5,
-            tooth_shaft: pinion.shaft_ratio,
-            ..ElementParams::plain(0.3, 0.1)
-        };
-        let m = build_model(&gb, &p).unwrap();
-        let d = m.tooth_damage[0].expect("damage on the reference mesh");
-        assert!(m.tooth_damage[1..].iter().all(Option::is_none));
-        assert_eq!(d.shaft_ratio, pinion.shaft_ratio);
-        // The stiffness factor: 1 − depth at the pulse centre, 1 outside one mesh period.
-        assert!((d.factor(d.width / 2.0) - 0.5).abs() < 1e-12);
-        assert_eq!(d.factor(d.width * 1.01), 1.0);
-        assert_eq!(d.factor(0.5), 1.0);
-        // Without damage the model is the plain one.
-        let plain = build_model(&gb, &ElementParams::plain(0.3, 0.1)).unwrap();
-        assert!(plain.tooth_damage.iter().all(Option::is_none));
-    }
-}
-
 /// The shafts and gears the element effects may sit on.
 pub(super) struct Mesh {
     /// The reference mesh's two gears ([`reference_gears`]).
@@ -382,5 +353,34 @@ impl Mesh {
             input,
             shafts,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tooth_damage_enters_the_reference_mesh_once_per_revolution() {
+        let gb = Gearbox::paper_rig();
+        let gears = reference_gears(&gb);
+        assert_eq!(gears.len(), 2);
+        let pinion = &gears[0];
+        let p = ElementParams {
+            tooth_depth: 0.5,
+            tooth_shaft: pinion.shaft_ratio,
+            ..ElementParams::plain(0.3, 0.1)
+        };
+        let m = build_model(&gb, &p).unwrap();
+        let d = m.tooth_damage[0].expect("damage on the reference mesh");
+        assert!(m.tooth_damage[1..].iter().all(Option::is_none));
+        assert_eq!(d.shaft_ratio, pinion.shaft_ratio);
+        // The stiffness factor: 1 − depth at the pulse centre, 1 outside one mesh period.
+        assert!((d.factor(d.width / 2.0) - 0.5).abs() < 1e-12);
+        assert_eq!(d.factor(d.width * 1.01), 1.0);
+        assert_eq!(d.factor(0.5), 1.0);
+        // Without damage the model is the plain one.
+        let plain = build_model(&gb, &ElementParams::plain(0.3, 0.1)).unwrap();
+        assert!(plain.tooth_damage.iter().all(Option::is_none));
     }
 }
