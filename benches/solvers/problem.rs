@@ -1,7 +1,6 @@
 //! The problem every solver integrates and what a run returns.
 
 use gearwear::model::GearOde;
-use gearwear::solver::OdeSystem;
 
 /// Integrate from τ = 0 (state `y0`) and sample every `dt` from `t0`, `n` samples.
 pub(crate) struct Problem<'a> {

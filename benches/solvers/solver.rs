@@ -1,7 +1,7 @@
 //! The solvers compared and how each is run on a [`Problem`].
 
 use differential_equations::methods::{DormandPrince, ExplicitRungeKutta, Ordinary};
-use gearwear::solver::Dopri5Options;
+use gearwear::solver::{Dopri5Options, OdeSystem};
 
 use crate::de::run_de;
 use crate::os::run_os;
