@@ -73,6 +73,8 @@
 
 #[path = "closed_loop/draw.rs"]
 mod draw;
+#[path = "common/out.rs"]
+mod out;
 #[path = "closed_loop/report.rs"]
 mod report;
 #[path = "closed_loop/row.rs"]
@@ -91,7 +93,7 @@ use rayon::prelude::*;
 
 use row::Row;
 use run::Bench;
-use settings::{Settings, flag, rows_path};
+use settings::{Settings, flag};
 
 fn main() {
     let table_path = concat!(env!("CARGO_MANIFEST_DIR"), "/signatures/model_a_accel.json");
@@ -105,7 +107,8 @@ fn main() {
         .map(|(base, i)| bench.record(base, i))
         .collect();
     let wall = t_all.elapsed().as_secs_f64();
-    let out = rows_path();
+    // Rows: `CL_OUT`, else `bench/closed_loop.json` under the build's target directory.
+    let out = out::out_path("CL_OUT", "closed_loop.json");
     std::fs::write(&out, serde_json::to_string_pretty(&rows).expect("json")).expect("write");
     eprintln!("rows: {}", out.display());
     let set = &bench.set;

@@ -75,10 +75,7 @@ impl Default for Settings {
                 rate_burst: 100.0,
                 request_timeout: Duration::from_secs(15),
             },
-            thresholds: Thresholds {
-                warning: 0.5,
-                alarm: 0.8,
-            },
+            thresholds: Thresholds::default(),
             webhooks: WebhookSettings {
                 max_attempts: 10,
                 base_backoff: Duration::from_secs(2),

@@ -1,8 +1,6 @@
 //! The benchmark's settings from the environment (the `CL_*` variables of the module docs),
 //! the kinds of record it draws, and where its rows go.
 
-use std::path::PathBuf;
-
 /// The environment variable `k` parsed, or `d`.
 pub fn env<T: std::str::FromStr>(k: &str, d: T) -> T {
     std::env::var(k)
@@ -102,18 +100,4 @@ impl Settings {
             })
             .collect()
     }
-}
-
-/// Where the rows go: `CL_OUT`, else `bench/closed_loop.json` under the build's target
-/// directory (`CARGO_TARGET_DIR`, else the workspace's `target/`), created if need be.
-pub fn rows_path() -> PathBuf {
-    if let Ok(p) = std::env::var("CL_OUT") {
-        return PathBuf::from(p);
-    }
-    let target = std::env::var_os("CARGO_TARGET_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/target")));
-    let dir = target.join("bench");
-    std::fs::create_dir_all(&dir).expect("create the bench output directory");
-    dir.join("closed_loop.json")
 }

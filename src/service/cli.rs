@@ -10,7 +10,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 
 use super::{AppState, check_exposure, serve};
-use crate::configuration::Settings;
+use crate::configuration::{Settings, Thresholds};
 use crate::keys::{self, Scope};
 use crate::store::{self, KeyRow, now_ms};
 
@@ -58,10 +58,10 @@ pub struct ServeArgs {
     #[arg(long, default_value_t = 7.0)]
     pub idempotency_retention_days: f64,
     /// Wear degree (ea) at which a machine turns `warning`.
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = Thresholds::default().warning)]
     pub warning_ea: f64,
     /// Wear degree (ea) at which a machine turns `alarm`.
-    #[arg(long, default_value_t = 0.8)]
+    #[arg(long, default_value_t = Thresholds::default().alarm)]
     pub alarm_ea: f64,
 }
 
