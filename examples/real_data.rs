@@ -3,8 +3,9 @@
 //! at loads 0, 20, 40, 60, 80 %.
 //!
 //! ```sh
-//! cargo run --release --example real_data                 # every channel
-//! cargo run --release --example real_data -- a1 a3       # some channels
+//! cargo run --release --example real_data                 # both datasets
+//! cargo run --release --example real_data -- helical      # the PHM 2009 helical records only
+//! cargo run --release --example real_data -- a1 a3        # SpectraQuest, some channels
 //! ```
 //! Env: `GFD_DIR` (default `../shared/data/spectraquest-gfd` next to the crate),
 //! `GFD_SEGMENTS` (segments per file, default 4).
@@ -75,7 +76,23 @@ fn f2(v: Option<f64>) -> String {
     v.map_or("–".into(), |v| format!("{v:.2}"))
 }
 
+#[path = "real_data/helical.rs"]
+mod helical;
+
 fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.first().map(String::as_str) == Some("helical") {
+        helical::run();
+        return;
+    }
+    spectraquest(args.clone());
+    if args.is_empty() {
+        helical::run();
+    }
+}
+
+/// The SpectraQuest evaluation, channels `channels` (all four when empty).
+fn spectraquest(mut channels: Vec<String>) {
     let dir = std::env::var("GFD_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|_| manifest("../shared/data/spectraquest-gfd"));
@@ -83,7 +100,6 @@ fn main() {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(4);
-    let mut channels: Vec<String> = std::env::args().skip(1).collect();
     if channels.is_empty() {
         channels = ["a1", "a2", "a3", "a4"].map(String::from).to_vec();
     }

@@ -7,15 +7,16 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 
+use super::baseline::{self, BaselineFile, Loaded};
 use super::common::{RigArgs, default_table_for, load_table, parse_range, progress_bar};
 use crate::analysis::bifurcation::grid;
 use crate::assessment::{
-    GearboxRef, Machine, MachineCalibration, RecordFacts, TableDiagnoser, Thresholds, assess,
-    baseline_features,
+    GearboxRef, Machine, MachineCalibration, RecordFacts, TableDiagnoser, TachoChannel, Thresholds,
+    assess,
 };
+use crate::condition::Load;
 use crate::diagnosis::DiagnoseOptions;
-use crate::novelty::{MIN_BASELINE_RECORDS, MachineBaseline};
-use crate::record::{Column, Format, ReadOptions, read_record};
+use crate::record::{Column, Format, ReadOptions, read_record, read_record_channels};
 use crate::signal::lines::SEGMENT_PERIODS;
 use crate::signature::SensorQuantity;
 use crate::signature::precompute::{
@@ -95,12 +96,31 @@ pub struct DiagnoseArgs {
     #[arg(long)]
     pub sample_rate: Option<f64>,
     /// Input (motor) shaft rate in Hz; f1 = 29 × this on the paper's rig. Without it f1 is
-    /// found in the spectrum.
+    /// found in the spectrum. With a described gearbox it is the nominal rate the real one is
+    /// measured around (tacho-less, ±6 %: motor slip), unless --tacho-column counts it.
     #[arg(long)]
     pub shaft_hz: Option<f64>,
-    /// CSV column (0-based index or header name) or WAV channel.
+    /// CSV column (0-based index or header name) or WAV channel; repeat it to assess several
+    /// channels of one record (the most severe decides).
     #[arg(long)]
-    pub column: Option<String>,
+    pub column: Vec<String>,
+    /// The record's tachometer column (name or index): the input-shaft rate and angle are then
+    /// counted from its pulses instead of tracked tacho-less around --shaft-hz.
+    #[arg(long, value_name = "NAME")]
+    pub tacho_column: Option<String>,
+    /// Tachometer pulses per input-shaft revolution.
+    #[arg(long, value_name = "N", default_value_t = 1, requires = "tacho_column")]
+    pub tacho_ppr: usize,
+    /// The load the record was taken at: a label (`High`) or a number; a state-aware baseline
+    /// compares the record with healthy records of the same load.
+    #[arg(long, value_name = "VALUE")]
+    pub load: Option<String>,
+    /// Healthy records with their operating states: a CSV with columns `file,shaft_hz,load`
+    /// (empty cells: measure the speed / load unknown; paths relative to the manifest). The
+    /// record is then judged against what these records expect at its measured speed and
+    /// load, and its `findings` name the part it points at.
+    #[arg(long, value_name = "F.csv")]
+    pub baseline_manifest: Option<PathBuf>,
     /// File format (default: from the extension).
     #[arg(long, value_enum)]
     pub format: Option<FormatArg>,
@@ -234,9 +254,9 @@ pub fn precompute_cmd(a: PrecomputeArgs) -> Result<()> {
 }
 
 /// `gearwear diagnose`: the record's [`Assessment`], built by the same core function as the
-/// service's answer to `POST /v1/machines/{id}/records` — the `--baseline` files as the
-/// machine's baseline, `--calibration` as its calibration, `--warning-ea`/`--alarm-ea` as its
-/// thresholds.
+/// service's answer to `POST /v1/machines/{id}/records` — the `--baseline` files (or the
+/// `--baseline-manifest`'s) as the machine's baseline, `--calibration` as its calibration,
+/// `--warning-ea`/`--alarm-ea` as its thresholds.
 pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
     if !(a.warning_ea < a.alarm_ea) {
         bail!("--warning-ea must be below --alarm-ea");
@@ -249,9 +269,8 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
             FormatArg::Wav => Format::Wav,
         }),
         sample_rate: a.sample_rate,
-        column: a.column.as_deref().map(Column::parse),
+        column: None,
     };
-    let record = read_record(&a.input, &opts)?;
     let calibration = a.calibration.as_deref().map(read_calibration).transpose()?;
     let diagnoser = TableDiagnoser::new(
         table,
@@ -261,7 +280,59 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
         },
     )?;
     let gearbox = diagnoser.table().gearbox();
-    let gearbox_ref = GearboxRef {
+    let load = a.load.as_deref().and_then(Load::parse);
+    let no_baseline = BTreeMap::new();
+    let no_states = BTreeMap::new();
+    let no_counts = BTreeMap::new();
+    let mut machine = Machine {
+        gearbox,
+        gearbox_ref: gearbox_ref(&a, gearbox),
+        // Order tracking needs the gearbox's tooth counts: only with a description.
+        described: a.gearbox.is_some(),
+        diagnoser: Some(&diagnoser),
+        table_note: None,
+        input_shaft_hz: None,
+        baselines: &no_baseline,
+        state_baselines: &no_states,
+        baseline_counts: &no_counts,
+        calibration: calibration.as_ref(),
+        thresholds: Thresholds {
+            warning: a.warning_ea,
+            alarm: a.alarm_ea,
+        },
+    };
+    // Baseline first: a wrong baseline file should fail before the diagnosis runs.
+    let files = baseline_files(&a, &load)?;
+    let (pooled, states, counts) = if files.is_empty() {
+        Default::default()
+    } else {
+        baseline::fit(
+            &files,
+            &machine,
+            &|p| load_record(p, &a, &opts),
+            &|f, rec| facts_of(rec, f.shaft_hz.or(a.shaft_hz), f.load.clone(), true),
+        )?
+    };
+    machine.baselines = &pooled;
+    machine.state_baselines = &states;
+    machine.baseline_counts = &counts;
+    let mut rec = load_record(&a.input, &a, &opts)?;
+    let facts = facts_of(&rec, a.shaft_hz, load, false);
+    let assessment = assess(
+        &mut rec.channels,
+        &rec.chosen,
+        &facts,
+        &machine,
+        &mut |_| {},
+    )?;
+    println!("{}", serde_json::to_string_pretty(&assessment)?);
+    Ok(())
+}
+
+/// The `gearbox` object of the answer: the description file's stem, the built-in rig's id, or
+/// the table's gearbox name.
+fn gearbox_ref(a: &DiagnoseArgs, gearbox: &crate::gearbox::Gearbox) -> GearboxRef {
+    GearboxRef {
         id: match &a.gearbox {
             Some(p) => p
                 .file_stem()
@@ -276,78 +347,93 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
         hash: gearbox.hash.clone(),
         table_status: "ready".into(),
         table_progress: 1.0,
-    };
-    let facts = RecordFacts {
-        sample_rate_hz: record.sample_rate,
-        shaft_hz: a.shaft_hz,
-        sensor: None,
-        declared_healthy: false,
-    };
-    let channel = a.column.clone().unwrap_or_else(|| "0".into());
-    let mut machine = Machine {
-        gearbox,
-        gearbox_ref,
-        // Order tracking needs the gearbox's tooth counts: only with a description.
-        described: a.gearbox.is_some(),
-        diagnoser: Some(&diagnoser),
-        table_note: None,
-        input_shaft_hz: None,
-        baselines: &BTreeMap::new(),
-        baseline_counts: &BTreeMap::new(),
-        calibration: calibration.as_ref(),
-        thresholds: Thresholds {
-            warning: a.warning_ea,
-            alarm: a.alarm_ea,
-        },
-    };
-    // Baseline first: a wrong baseline file should fail before the diagnosis runs.
-    let (baselines, baseline_counts) = baseline(&a, &opts, &channel, &machine)?;
-    machine.baselines = &baselines;
-    machine.baseline_counts = &baseline_counts;
-    let mut channels = vec![(channel, record.samples)];
-    let assessment = assess(&mut channels, &[0], &facts, &machine, &mut |_| {})?;
-    println!("{}", serde_json::to_string_pretty(&assessment)?);
-    Ok(())
+    }
 }
 
-/// The machine's baseline from the `--baseline` files: their features as the service computes
-/// them for records posted with `?baseline=true`, fitted; `(fitted, records)` by channel
-/// (empty without `--baseline`).
-fn baseline(
-    a: &DiagnoseArgs,
-    opts: &ReadOptions,
-    channel: &str,
-    machine: &Machine,
-) -> Result<(BTreeMap<String, MachineBaseline>, BTreeMap<String, usize>)> {
-    if a.baseline.is_empty() {
-        return Ok(Default::default());
+fn facts_of(rec: &Loaded, shaft_hz: Option<f64>, load: Option<Load>, healthy: bool) -> RecordFacts {
+    RecordFacts {
+        sample_rate_hz: rec.sample_rate_hz,
+        shaft_hz,
+        sensor: None,
+        declared_healthy: healthy,
+        load,
+        tacho: rec.tacho.clone(),
     }
-    let mut feats = Vec::with_capacity(a.baseline.len());
-    for path in &a.baseline {
-        let rec = read_record(path, opts)
-            .with_context(|| format!("baseline record {}", path.display()))?;
-        let facts = RecordFacts {
-            sample_rate_hz: rec.sample_rate,
+}
+
+/// The healthy records: the `--baseline` files (at the command line's --shaft-hz and --load)
+/// and the `--baseline-manifest`'s.
+fn baseline_files(a: &DiagnoseArgs, load: &Option<Load>) -> Result<Vec<BaselineFile>> {
+    let mut files: Vec<BaselineFile> = a
+        .baseline
+        .iter()
+        .map(|p| BaselineFile {
+            path: p.clone(),
             shaft_hz: a.shaft_hz,
-            sensor: None,
-            declared_healthy: true,
+            load: load.clone(),
+        })
+        .collect();
+    if let Some(m) = &a.baseline_manifest {
+        files.extend(baseline::read_manifest(m)?);
+    }
+    Ok(files)
+}
+
+/// A record's channels to assess (the `--column`s, else every channel but the tachometer)
+/// and its tachometer. One column and no tachometer: read as a single-channel record (a
+/// `time,value` CSV, a WAV's first channel), named by `--column` or `"0"`.
+fn load_record(path: &std::path::Path, a: &DiagnoseArgs, opts: &ReadOptions) -> Result<Loaded> {
+    if a.tacho_column.is_none() && a.column.len() <= 1 {
+        let opts = ReadOptions {
+            column: a.column.first().map(|c| Column::parse(c)),
+            ..opts.clone()
         };
-        feats.push(
-            baseline_features(&rec, &facts, machine)
-                .with_context(|| format!("baseline record {}", path.display()))?,
+        let r = read_record(path, &opts)?;
+        return Ok(Loaded {
+            channels: vec![(a.column.first().cloned().unwrap_or("0".into()), r.samples)],
+            chosen: vec![0],
+            sample_rate_hz: r.sample_rate,
+            tacho: None,
+        });
+    }
+    let m = read_record_channels(path, opts)?;
+    let tacho = match &a.tacho_column {
+        Some(t) => Some(TachoChannel {
+            name: m.channel(t)?.name.clone(),
+            pulses_per_rev: a.tacho_ppr,
+        }),
+        None => None,
+    };
+    let names = m.names();
+    let chosen: Vec<usize> = if a.column.is_empty() {
+        (0..names.len())
+            .filter(|&i| tacho.as_ref().is_none_or(|t| t.name != names[i]))
+            .collect()
+    } else {
+        a.column
+            .iter()
+            .map(|c| {
+                let n = &m.channel(c)?.name;
+                Ok(names.iter().position(|x| x == n).unwrap_or(0))
+            })
+            .collect::<Result<_>>()?
+    };
+    if chosen.is_empty() {
+        bail!(
+            "{} has no channel to assess besides the tachometer",
+            path.display()
         );
     }
-    let b = MachineBaseline::fit(&feats).with_context(|| {
-        format!(
-            "{} --baseline file(s) given; give at least {MIN_BASELINE_RECORDS} healthy \
-             records of the machine",
-            a.baseline.len()
-        )
-    })?;
-    Ok((
-        BTreeMap::from([(channel.to_string(), b)]),
-        BTreeMap::from([(channel.to_string(), feats.len())]),
-    ))
+    Ok(Loaded {
+        channels: m
+            .channels
+            .into_iter()
+            .map(|c| (c.name, c.samples))
+            .collect(),
+        chosen,
+        sample_rate_hz: m.sample_rate,
+        tacho,
+    })
 }
 
 /// A machine's calibration from the JSON of `GET /v1/machines/{id}/calibration` (or of the

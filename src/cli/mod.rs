@@ -11,6 +11,7 @@
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
+pub mod baseline;
 pub mod calibrate;
 pub mod common;
 pub mod diagnose;

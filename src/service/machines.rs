@@ -27,7 +27,9 @@ use super::auth::Caller;
 use super::error::{ApiError, ApiResult};
 use super::gearboxes::BUILTIN_ID;
 use super::http::{check_gearbox_id, check_machine_id, json_with_etag, read_body};
+use crate::assessment::state_baseline;
 use crate::assessment::{GearboxRef, TableDiagnoser};
+use crate::condition::StateBaseline;
 use crate::gearbox::Gearbox;
 use crate::keys::Scope;
 use crate::novelty::{MIN_BASELINE_RECORDS, MachineBaseline, RecordFeatures};
@@ -123,13 +125,24 @@ pub async fn context(app: &AppState, machine_id: &str) -> ApiResult<MachineConte
     })
 }
 
-/// The machine's baseline per channel, fitted from the stored features of its baseline
-/// records computed with gearbox description `hash`; `(fitted, records per channel)`.
-pub async fn baselines(
+/// A machine's baselines per channel, fitted from the stored features of its baseline
+/// records computed with its gearbox description.
+#[derive(Debug, Default)]
+pub struct Baselines {
+    pub pooled: BTreeMap<String, MachineBaseline>,
+    /// State-aware, where enough baseline records carry a measured state.
+    pub states: BTreeMap<String, StateBaseline>,
+    /// Baseline records per channel.
+    pub counts: BTreeMap<String, usize>,
+}
+
+/// The stored features of the machine's baseline records computed with gearbox description
+/// `hash`, per channel.
+pub async fn baseline_features(
     app: &AppState,
     machine_id: &str,
     hash: &str,
-) -> ApiResult<(BTreeMap<String, MachineBaseline>, BTreeMap<String, usize>)> {
+) -> ApiResult<BTreeMap<String, Vec<RecordFeatures>>> {
     let rows = app.store.baseline_records(machine_id).await?;
     let mut per: BTreeMap<String, Vec<RecordFeatures>> = BTreeMap::new();
     for r in rows {
@@ -149,16 +162,33 @@ pub async fn baselines(
             }
         }
     }
+    Ok(per)
+}
+
+/// The machine's baselines per channel, fitted from the stored features of its baseline
+/// records computed with gearbox description `hash`.
+pub async fn baselines(app: &AppState, machine_id: &str, hash: &str) -> ApiResult<Baselines> {
+    let per = baseline_features(app, machine_id, hash).await?;
     let counts = per.iter().map(|(k, v)| (k.clone(), v.len())).collect();
-    let fitted = tokio::task::spawn_blocking(move || {
-        per.into_iter()
+    let (pooled, states) = tokio::task::spawn_blocking(move || {
+        let pooled = per
+            .iter()
             .filter(|(_, v)| v.len() >= MIN_BASELINE_RECORDS)
-            .filter_map(|(k, v)| MachineBaseline::fit(&v).ok().map(|b| (k, b)))
-            .collect::<BTreeMap<_, _>>()
+            .filter_map(|(k, v)| MachineBaseline::fit(v).ok().map(|b| (k.clone(), b)))
+            .collect::<BTreeMap<_, _>>();
+        let states = per
+            .iter()
+            .filter_map(|(k, v)| Some((k.clone(), state_baseline(v)?.ok()?)))
+            .collect::<BTreeMap<_, _>>();
+        (pooled, states)
     })
     .await
     .map_err(|e| ApiError::internal(format!("fitting the baseline failed: {e}")))?;
-    Ok((fitted, counts))
+    Ok(Baselines {
+        pooled,
+        states,
+        counts,
+    })
 }
 
 /// A JSON object as `T` (serde alone also takes an array for a struct: `[null, null]`).
@@ -295,10 +325,11 @@ pub async fn baseline_json(app: &AppState, m: &MachineRow) -> ApiResult<Value> {
         Some(g) => app.store.get_gearbox(g).await?.map(|r| r.hash),
         None => app.store.get_gearbox(BUILTIN_ID).await?.map(|r| r.hash),
     };
-    let (fitted, counts) = match &ctx_hash {
+    let b = match &ctx_hash {
         Some(h) => baselines(app, &m.id, h).await?,
-        None => Default::default(),
+        None => Baselines::default(),
     };
+    let (fitted, counts) = (&b.pooled, &b.counts);
     let records: Vec<Value> = rows
         .iter()
         .map(|r| {
@@ -315,10 +346,17 @@ pub async fn baseline_json(app: &AppState, m: &MachineRow) -> ApiResult<Value> {
     let channels: BTreeMap<String, Value> = counts
         .iter()
         .map(|(k, n)| {
-            let b = fitted.get(k);
+            let p = fitted.get(k);
+            let st = b.states.get(k);
             (
                 k.clone(),
-                json!({"records": n, "ready": b.is_some(), "threshold": b.map(|b| b.threshold)}),
+                json!({
+                    "records": n,
+                    "ready": p.is_some(),
+                    "threshold": st.map(|s| s.threshold()).or(p.map(|p| p.threshold)),
+                    "state_aware": st.is_some(),
+                    "coverage": st.map(|s| s.coverage()),
+                }),
             )
         })
         .collect();

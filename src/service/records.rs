@@ -2,7 +2,6 @@
 //! core's [`crate::assessment::assess`]), store in one transaction, answer 201 with the
 //! assessment. `Idempotency-Key` makes retries safe.
 
-use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
@@ -26,7 +25,6 @@ use crate::assessment::{
 };
 use crate::gearbox::Gearbox;
 use crate::keys::Scope;
-use crate::novelty::MachineBaseline;
 use crate::store::{DiagnosisRow, IdemRow, Ingest, NewRecord, StoreError, new_id, now_ms};
 
 /// The handler.
@@ -410,8 +408,7 @@ struct AssessJob {
     chosen: Vec<usize>,
     ctx: MachineContext,
     calibration: Option<MachineCalibration>,
-    baselines: BTreeMap<String, MachineBaseline>,
-    baseline_counts: BTreeMap<String, usize>,
+    baselines: super::machines::Baselines,
     thresholds: Thresholds,
     /// Posted with `?baseline=true`.
     declared_healthy: bool,
@@ -434,8 +431,7 @@ impl AssessJob {
             channel,
             ctx.machine.as_ref().and_then(|m| m.channels.as_deref()),
         )?;
-        let (baselines, baseline_counts) =
-            super::machines::baselines(app, machine_id, &ctx.gearbox_row.hash).await?;
+        let baselines = super::machines::baselines(app, machine_id, &ctx.gearbox_row.hash).await?;
         let calibration = app
             .store
             .get_calibration(machine_id)
@@ -447,7 +443,6 @@ impl AssessJob {
             ctx,
             calibration,
             baselines,
-            baseline_counts,
             thresholds: app.settings.thresholds,
             declared_healthy,
         })
@@ -461,6 +456,8 @@ impl AssessJob {
             shaft_hz: self.dec.shaft_hz,
             sensor: self.dec.sensor.clone(),
             declared_healthy: self.declared_healthy,
+            load: None,
+            tacho: None,
         };
         let ctx = &self.ctx;
         let diagnoser: Option<&TableDiagnoser> = ctx.diagnoser.as_deref();
@@ -471,8 +468,9 @@ impl AssessJob {
             diagnoser,
             table_note: ctx.table_note(),
             input_shaft_hz: ctx.input_shaft_hz(),
-            baselines: &self.baselines,
-            baseline_counts: &self.baseline_counts,
+            baselines: &self.baselines.pooled,
+            state_baselines: &self.baselines.states,
+            baseline_counts: &self.baselines.counts,
             calibration: self.calibration.as_ref(),
             thresholds: self.thresholds,
         };

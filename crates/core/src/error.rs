@@ -311,6 +311,9 @@ pub enum GearboxError {
         "input_shaft \"{shaft}\" is on no stage; name the shaft of a gear of stage 1 (shafts: {known})"
     )]
     UnknownInput { shaft: String, known: String },
+    /// A `[[bearing]]` that names an unknown shaft or gives neither geometry nor orders.
+    #[error("[[bearing]] \"{name}\": {reason}")]
+    Bearing { name: String, reason: String },
     /// The output shaft (or a `[shafts.X]` table) names an unknown shaft.
     #[error("{field} names shaft \"{shaft}\", which no gear sits on (shafts: {known})")]
     UnknownShaft {

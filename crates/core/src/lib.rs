@@ -31,6 +31,7 @@
 pub mod analysis;
 pub mod assessment;
 pub mod closed_loop;
+pub mod condition;
 pub mod diagnosis;
 pub mod error;
 pub mod gearbox;

@@ -77,7 +77,7 @@ pub const TOP_K: usize = 3;
 pub const MIN_THRESHOLD: f64 = 3.0;
 
 /// What a baseline is made of: the features of one record (one channel).
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
 pub struct RecordFeatures {
     /// Named scalar features (order-spectrum levels, TSA metrics, …); the baseline's inputs.
     pub values: BTreeMap<String, f64>,
@@ -88,6 +88,13 @@ pub struct RecordFeatures {
     /// when the threshold is calibrated. `None`: the record is its own group.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub group: Option<String>,
+    /// The record's measured operating state, when its speed was measured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub state: Option<crate::condition::OperatingState>,
+    /// Order-domain evidence ([`crate::condition::evidence`]): what a state-aware baseline
+    /// compares.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub evidence: BTreeMap<String, f64>,
 }
 
 impl RecordFeatures {
@@ -303,7 +310,7 @@ pub fn record_features_with(
     Ok(RecordFeatures {
         values,
         indicators: serde_json::Value::Object(indicators),
-        group: None,
+        ..Default::default()
     })
 }
 
@@ -519,7 +526,7 @@ mod tests {
         RecordFeatures {
             values: pairs.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
             indicators: serde_json::Value::Null,
-            group: None,
+            ..Default::default()
         }
     }
 
@@ -597,7 +604,7 @@ mod tests {
             RecordFeatures {
                 values: pairs.into_iter().collect(),
                 indicators: serde_json::Value::Null,
-                group: None,
+                ..Default::default()
             }
         };
         let base: Vec<RecordFeatures> = (0..12).map(|_| rec(0.0)).collect();

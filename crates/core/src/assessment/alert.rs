@@ -293,9 +293,11 @@ mod tests {
             features: RecordFeatures {
                 values: Default::default(),
                 indicators: serde_json::Value::Null,
-                group: None,
+                ..Default::default()
             },
             novelty: Some(nov(score)),
+            state: None,
+            findings: Vec::new(),
             alert: Alert {
                 level,
                 basis: "novelty",

@@ -10,6 +10,7 @@
 //! `baseline`, `indicators`, `alert`).
 
 pub mod alert;
+pub mod condition;
 pub mod diagnoser;
 
 use std::collections::BTreeMap;
@@ -18,10 +19,12 @@ use serde::Serialize;
 use serde_json::Value;
 
 pub use alert::{Alert, Thresholds, alert, deciding, severity};
+pub use condition::{Measured, StateJudgement, TachoChannel, fit_baselines, state_baseline};
 pub use diagnoser::{
     CalibrationUse, MachineCalibration, PathCorrection, TableDiagnoser, TableReading, WearInterval,
 };
 
+use crate::condition::{Finding, Load, OperatingState, StateBaseline};
 use crate::diagnosis::{Diagnosis, Fit, WearDegree};
 use crate::gearbox::Gearbox;
 use crate::novelty::{
@@ -46,6 +49,9 @@ pub struct Machine<'a> {
     pub input_shaft_hz: Option<f64>,
     /// The machine's baseline per channel (fitted ones only).
     pub baselines: &'a BTreeMap<String, MachineBaseline>,
+    /// The machine's state-aware baseline per channel (from baseline records with a measured
+    /// state and evidence); a channel that has one is judged against it, not `baselines`.
+    pub state_baselines: &'a BTreeMap<String, StateBaseline>,
     /// Baseline records per channel (fitted or not).
     pub baseline_counts: &'a BTreeMap<String, usize>,
     /// The machine's calibration.
@@ -62,6 +68,10 @@ pub struct RecordFacts {
     pub sensor: Option<String>,
     /// The record was sent as healthy (part of the machine's baseline).
     pub declared_healthy: bool,
+    /// The load the record was taken at, when the sender says.
+    pub load: Option<Load>,
+    /// The record's tachometer channel, when it has one.
+    pub tacho: Option<TachoChannel>,
 }
 
 /// The `gearbox` object of an assessment: which description and table it used.
@@ -117,6 +127,7 @@ pub struct ChannelSummary {
     pub wear_degree: Option<WearDegree>,
     pub fit: Option<Fit>,
     pub novelty: Option<Novelty>,
+    pub findings: Vec<Finding>,
 }
 
 /// One channel of a record, analysed.
@@ -127,6 +138,9 @@ pub struct ChannelAssessment {
     pub reading: Option<TableReading>,
     pub features: RecordFeatures,
     pub novelty: Option<Novelty>,
+    /// The comparison with the state-aware baseline, when the channel has one.
+    pub state: Option<StateJudgement>,
+    pub findings: Vec<Finding>,
     pub alert: Alert,
 }
 
@@ -143,6 +157,7 @@ impl ChannelAssessment {
                 .map(|r| r.diagnosis.wear_degree.clone()),
             fit: self.reading.as_ref().map(|r| r.diagnosis.fit.clone()),
             novelty: self.novelty.clone(),
+            findings: self.findings.clone(),
         }
     }
 }
@@ -162,7 +177,18 @@ pub struct Assessment {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub channels: Option<Vec<ChannelSummary>>,
     pub gearbox: GearboxRef,
+    /// The record's measured operating state (`null` when the speed was not measured:
+    /// `state_note` says why).
+    pub operating_state: Option<OperatingState>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub state_note: Option<String>,
+    /// What the deciding channel's departure from its state's baseline points at, strongest
+    /// first (empty when it does not depart, or without a state-aware baseline).
+    pub findings: Vec<Finding>,
     pub novelty: Option<Novelty>,
+    /// How the deciding channel compares with the state-aware baseline.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub state_reference: Option<StateJudgement>,
     pub baseline: BaselineUse,
     /// The deciding channel's condition indicators and order tracking, for people.
     pub indicators: Value,
@@ -182,9 +208,13 @@ impl Assessment {
     }
 
     /// The wear the machine's trend and alert follow (see [`TableReading::wear`]); `None`
-    /// without a table.
+    /// without a table or when the model does not fit the record (no wear figure).
     pub fn wear(&self) -> Option<WearInterval> {
-        self.deciding_channel().reading.as_ref().map(|r| r.wear)
+        self.deciding_channel()
+            .reading
+            .as_ref()
+            .filter(|r| r.diagnosis.wear_degree.withheld.is_none())
+            .map(|r| r.wear)
     }
 
     /// The record's alert level.
@@ -206,6 +236,7 @@ pub fn assess(
     machine: &Machine,
     stage: &mut dyn FnMut(&'static str),
 ) -> crate::Result<Assessment> {
+    let measured = condition::measure_record(channels, chosen, facts, machine)?;
     let mut assessed = Vec::with_capacity(chosen.len());
     for &i in chosen {
         let name = channels[i].0.clone();
@@ -214,76 +245,163 @@ pub fn assess(
             samples: std::mem::take(&mut channels[i].1),
             sample_rate: facts.sample_rate_hz,
         };
-        let result = assess_channel(name, &rec, facts, machine, stage);
+        let result = assess_channel(name, &rec, facts, machine, &measured, stage);
         channels[i].1 = rec.samples;
         assessed.push(result?);
     }
-    Ok(assemble(assessed, facts, machine))
+    Ok(assemble(assessed, facts, machine, measured))
 }
 
-/// A record's novelty features exactly as its assessment computes them — what a machine's
-/// baseline is fitted from (the service stores them with each record; `gearwear diagnose`
-/// computes them for its `--baseline` files). With a described gearbox they track its shafts
-/// from the diagnosis's f1, so the record is diagnosed first; otherwise they are
-/// description-free and no diagnosis enters them.
+/// The features of a record's chosen channels exactly as its assessment computes them — what
+/// a machine's baseline is fitted from (the service stores them with each record;
+/// `gearwear diagnose` computes them for its baseline files).
 pub fn baseline_features(
-    rec: &Record,
+    channels: &mut [(String, Vec<f64>)],
+    chosen: &[usize],
     facts: &RecordFacts,
     machine: &Machine,
-) -> crate::Result<RecordFeatures> {
-    if !machine.described {
-        return record_features_with(rec, None, None, None);
-    }
-    assess_channel(String::new(), rec, facts, machine, &mut |_| {}).map(|c| c.features)
+) -> crate::Result<Vec<RecordFeatures>> {
+    let a = assess(channels, chosen, facts, machine, &mut |_| {})?;
+    Ok(a.assessed.into_iter().map(|c| c.features).collect())
 }
 
-/// One channel: its reading, features, novelty and alert.
+/// One channel: its reading, features, novelty (against the state-aware baseline when the
+/// channel has one), findings and alert.
 fn assess_channel(
     name: String,
     rec: &Record,
     facts: &RecordFacts,
     machine: &Machine,
+    measured: &Measured,
     stage: &mut dyn FnMut(&'static str),
 ) -> crate::Result<ChannelAssessment> {
-    let gearbox = machine.gearbox;
-    let reading = match machine.diagnoser {
-        Some(d) => Some(d.read(rec, facts.shaft_hz, machine.calibration)?),
-        None => None,
-    };
+    let has_baseline =
+        machine.baselines.contains_key(&name) || machine.state_baselines.contains_key(&name);
+    let (reading, table_miss) = read_table(rec, facts, machine, measured, has_baseline)?;
     stage("diagnosis");
-    let hint = facts.shaft_hz.or(machine.input_shaft_hz).or(reading
-        .as_ref()
-        .map(|o| o.diagnosis.f1_hz / gearbox.f1_per_input_hz));
-    // Order features only for a gearbox the machine was given: the built-in rig a machine
-    // defaults to would track 29 teeth in another gearbox's records (noise features that make
-    // a baseline unstable); without one the features are description-free.
-    let gb = machine.described.then_some(gearbox);
-    // A described machine's diagnosis ran on its own gearbox's table and tracked the record
-    // already: its order analysis is reused, not computed twice — when the f1 it tracked from
-    // agrees (±1 %, its tracker's search) with the speed the features would start from (a
-    // given or configured shaft rate may disagree with a tacho-less diagnosis; then the record
-    // is tracked again from that rate).
-    let order = reading
-        .as_ref()
-        .filter(|o| hint.is_none_or(|h| (o.diagnosis.f1_hz / gearbox.f1_hz(h) - 1.0).abs() < 0.01))
-        .and_then(|o| o.order.as_ref());
-    let features = record_features_with(rec, gb, hint, order)?;
-    let novelty = machine.baselines.get(&name).map(|b| b.score(&features));
-    let alert = alert(
+    let features = channel_features(rec, facts, machine, measured, reading.as_ref())?;
+    let judged = machine
+        .state_baselines
+        .get(&name)
+        .and_then(|b| condition::judge(b, &features, machine));
+    let (novelty, state, findings, uncovered) = match judged {
+        Some(Ok((n, j, f))) => (Some(n), Some(j), f, None),
+        Some(Err(missing)) => (None, None, Vec::new(), Some(missing)),
+        None => (
+            machine.baselines.get(&name).map(|b| b.score(&features)),
+            None,
+            Vec::new(),
+            None,
+        ),
+    };
+    let note = table_miss.as_deref().or(machine.table_note.as_deref());
+    let mut alert = alert(
         reading.as_ref().map(TableReading::alert_wear),
         novelty.as_ref(),
         &machine.thresholds,
-        machine.table_note.as_deref(),
+        note,
         facts.declared_healthy,
     );
+    if let Some(missing) = uncovered.filter(|_| !facts.declared_healthy) {
+        alert = Alert {
+            level: "unknown",
+            basis: "baseline",
+            reason: format!("this record's operating state is not covered: {missing}"),
+        };
+    }
     stage("features");
     Ok(ChannelAssessment {
         name,
         reading,
         features,
         novelty,
+        state,
+        findings,
         alert,
     })
+}
+
+/// The table's reading of a channel at the measured speed, with the wear withheld when the
+/// model does not fit. A speed outside the table is not an error for a channel with a
+/// baseline (the baseline still judges it): `(None, Some(why))`.
+fn read_table(
+    rec: &Record,
+    facts: &RecordFacts,
+    machine: &Machine,
+    measured: &Measured,
+    has_baseline: bool,
+) -> crate::Result<(Option<TableReading>, Option<String>)> {
+    let Some(d) = machine.diagnoser else {
+        return Ok((None, None));
+    };
+    let shaft_hz = measured
+        .state
+        .as_ref()
+        .map(|s| s.shaft_hz)
+        .or(facts.shaft_hz);
+    let mut r = match d.read(rec, shaft_hz, machine.calibration) {
+        Ok(r) => r,
+        Err(e @ crate::Error::SpeedOutOfBand { .. }) if has_baseline => {
+            return Ok((
+                None,
+                Some(format!(
+                    "no wear figure: {e}; precompute the table over the machine's speeds \
+                     (gearwear precompute --input-hz LO:HI:STEP)"
+                )),
+            ));
+        }
+        Err(e) => return Err(e),
+    };
+    let fit = &r.diagnosis.fit;
+    if fit.inflated {
+        let why = format!(
+            "no wear figure: the model does not fit this record (χ² per feature {:.1} over {} \
+             features); a wear degree read off it would be the prior's, not the machine's",
+            fit.chi2_per_feature, fit.features
+        );
+        r.diagnosis.wear_degree.withheld = Some(why.clone());
+        r.diagnosis.wear_note = Some(why);
+    }
+    Ok((Some(r), None))
+}
+
+/// The channel's features: description-free ones, the per-shaft TSA (from the measured angle
+/// when there is one, else reused from the reading or tracked from the speed hint) and, with
+/// a measured state, the order-domain evidence.
+fn channel_features(
+    rec: &Record,
+    facts: &RecordFacts,
+    machine: &Machine,
+    measured: &Measured,
+    reading: Option<&TableReading>,
+) -> crate::Result<RecordFeatures> {
+    let gearbox = machine.gearbox;
+    let hint = measured
+        .state
+        .as_ref()
+        .map(|s| s.shaft_hz)
+        .or(facts.shaft_hz)
+        .or(machine.input_shaft_hz)
+        .or(reading.map(|o| o.diagnosis.f1_hz / gearbox.f1_per_input_hz));
+    // Order features only for a gearbox the machine was given: the built-in rig a machine
+    // defaults to would track 29 teeth in another gearbox's records (noise features that make
+    // a baseline unstable); without one the features are description-free.
+    let gb = machine.described.then_some(gearbox);
+    let at_angle = condition::order_at(rec, machine, measured);
+    // Without a measured angle, a described machine's diagnosis ran on its own gearbox's
+    // table and tracked the record already: its order analysis is reused — when the f1 it
+    // tracked from agrees (±1 %, its tracker's search) with the speed the features would
+    // start from.
+    let order = at_angle.as_ref().or_else(|| {
+        reading
+            .filter(|o| {
+                hint.is_none_or(|h| (o.diagnosis.f1_hz / gearbox.f1_hz(h) - 1.0).abs() < 0.01)
+            })
+            .and_then(|o| o.order.as_ref())
+    });
+    let mut features = record_features_with(rec, gb, hint, order)?;
+    condition::add_evidence(&mut features, rec, machine, measured, order);
+    Ok(features)
 }
 
 /// The record's answer from its channels: the deciding channel's reading, novelty and alert,
@@ -292,6 +410,7 @@ fn assemble(
     assessed: Vec<ChannelAssessment>,
     facts: &RecordFacts,
     machine: &Machine,
+    measured: Measured,
 ) -> Assessment {
     let di = deciding(&assessed);
     let decide = &assessed[di];
@@ -323,7 +442,11 @@ fn assemble(
         channels: (assessed.len() > 1)
             .then(|| assessed.iter().map(ChannelAssessment::summary).collect()),
         gearbox: machine.gearbox_ref.clone(),
+        operating_state: measured.state,
+        state_note: measured.note,
+        findings: decide.findings.clone(),
         novelty: decide.novelty.clone(),
+        state_reference: decide.state.clone(),
         baseline: BaselineUse {
             records: machine
                 .baseline_counts

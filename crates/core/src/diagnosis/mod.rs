@@ -162,6 +162,7 @@ fn diagnose_inner(
         };
     let diagnosis = Diagnosis {
         wear_degree: wear,
+        wear_note: None,
         f1_hz: f1,
         shaft_hz: shaft,
         omega1,

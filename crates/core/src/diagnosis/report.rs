@@ -13,8 +13,10 @@ use crate::signal::mesh_search::F1Detection;
 use crate::signal::tsa::OrderAnalysis;
 use crate::signature::{LineDef, SignatureTable};
 
-/// The wear estimate.
-#[derive(Debug, Clone, Serialize)]
+/// The wear estimate. It serialises as `null` when [`WearDegree::withheld`] says why it is not
+/// shown (a record the model does not fit): a number read off a model that does not explain
+/// the record is not a wear figure.
+#[derive(Debug, Clone)]
 pub struct WearDegree {
     /// Posterior median of ea (units of b = 5 µm).
     pub estimate: f64,
@@ -26,6 +28,32 @@ pub struct WearDegree {
     pub level: f64,
     /// Posterior mode.
     pub mode: f64,
+    /// Why the figure is withheld from the answer (`None`: shown).
+    pub withheld: Option<String>,
+}
+
+impl Serialize for WearDegree {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        #[derive(Serialize)]
+        struct Shown {
+            estimate: f64,
+            lower: f64,
+            upper: f64,
+            level: f64,
+            mode: f64,
+        }
+        if self.withheld.is_some() {
+            return s.serialize_none();
+        }
+        Shown {
+            estimate: self.estimate,
+            lower: self.lower,
+            upper: self.upper,
+            level: self.level,
+            mode: self.mode,
+        }
+        .serialize(s)
+    }
 }
 
 /// One measured line.
@@ -107,6 +135,9 @@ pub struct RecordInfo {
 #[derive(Debug, Clone, Serialize)]
 pub struct Diagnosis {
     pub wear_degree: WearDegree,
+    /// Why `wear_degree` is `null`, when it is.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub wear_note: Option<String>,
     /// Stage-1 mesh frequency (Hz).
     pub f1_hz: f64,
     /// Input-shaft rate implied by f1 (Hz), `f1 / z1`.
@@ -193,6 +224,7 @@ pub(super) fn wear_degree(post: &Posterior, level: f64) -> WearDegree {
         upper: post.quantile(0.5 * (1.0 + c)),
         level: c,
         mode: post.mode(),
+        withheld: None,
     }
 }
 

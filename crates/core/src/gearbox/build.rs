@@ -151,6 +151,23 @@ impl Settings {
             positive(format!("[shafts.{name}] inertia"), s.inertia)?;
             non_negative(format!("[shafts.{name}] damping_ratio"), s.damping_ratio)?;
         }
+        for b in &d.bearings {
+            let reason = if !topo.shafts.contains(&b.shaft) {
+                Some(format!(
+                    "shaft \"{}\" carries no gear (shafts: {})",
+                    b.shaft,
+                    topo.shafts.join(", ")
+                ))
+            } else {
+                b.defect_orders().err()
+            };
+            if let Some(reason) = reason {
+                return Err(GearboxError::Bearing {
+                    name: b.name.clone(),
+                    reason,
+                });
+            }
+        }
         Ok(Settings {
             length_ref_um,
             b_ref,

@@ -76,6 +76,120 @@ pub struct GearboxDescription {
     /// Material density for inertias estimated from geometry (kg/m³; default 7850, steel).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub density_kg_m3: Option<f64>,
+    /// Rolling-element bearings whose defect frequencies the findings look for (`[[bearing]]`;
+    /// they do not enter the dynamic model).
+    #[serde(
+        rename = "bearing",
+        alias = "bearings",
+        default,
+        skip_serializing_if = "Vec::is_empty"
+    )]
+    pub bearings: Vec<BearingSpec>,
+}
+
+/// A rolling-element bearing (`[[bearing]]`): its shaft and either its geometry or its
+/// defect orders (defect frequency over the shaft's rate) directly.
+///
+/// From the geometry (rolling elements `n`, ball diameter `d`, pitch diameter `D`, contact
+/// angle `β`, outer race fixed): `BPFO = n/2 (1 − d/D cos β)`, `BPFI = n/2 (1 + d/D cos β)`,
+/// `BSF = D/(2d) (1 − (d/D cos β)²)`, `FTF = ½ (1 − d/D cos β)`.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BearingSpec {
+    /// A short name the findings use (e.g. `"in-output-side"`).
+    pub name: String,
+    /// The shaft it carries (a shaft of the stages).
+    pub shaft: String,
+    /// Number of rolling elements.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rolling_elements: Option<u32>,
+    /// Ball (roller) diameter (mm).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ball_diameter_mm: Option<f64>,
+    /// Pitch diameter (mm).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pitch_diameter_mm: Option<f64>,
+    /// Contact angle (degrees; default 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contact_angle_deg: Option<f64>,
+    /// Ball-pass frequency of the outer race over the shaft rate (instead of the geometry).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bpfo: Option<f64>,
+    /// Ball-pass frequency of the inner race over the shaft rate.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bpfi: Option<f64>,
+    /// Ball spin frequency over the shaft rate.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bsf: Option<f64>,
+    /// Fundamental train (cage) frequency over the shaft rate.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ftf: Option<f64>,
+}
+
+/// A bearing's defect orders: defect frequency over its shaft's rate.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct DefectOrders {
+    pub bpfo: f64,
+    pub bpfi: f64,
+    pub bsf: f64,
+    pub ftf: f64,
+}
+
+impl BearingSpec {
+    /// The defect orders: those given, else from the geometry. `Err` names what is missing or
+    /// out of range.
+    pub fn defect_orders(&self) -> Result<DefectOrders, String> {
+        let given = [self.bpfo, self.bpfi, self.bsf, self.ftf];
+        if given.iter().all(Option::is_some) {
+            let o = DefectOrders {
+                bpfo: self.bpfo.unwrap_or_default(),
+                bpfi: self.bpfi.unwrap_or_default(),
+                bsf: self.bsf.unwrap_or_default(),
+                ftf: self.ftf.unwrap_or_default(),
+            };
+            if [o.bpfo, o.bpfi, o.bsf, o.ftf]
+                .iter()
+                .all(|v| v.is_finite() && *v > 0.0)
+            {
+                return Ok(o);
+            }
+            return Err("its defect orders must be positive numbers".into());
+        }
+        if given.iter().any(Option::is_some) {
+            return Err(
+                "give all four defect orders (bpfo, bpfi, bsf, ftf) or the geometry \
+                 (rolling_elements, ball_diameter_mm, pitch_diameter_mm)"
+                    .into(),
+            );
+        }
+        let (Some(n), Some(d), Some(p)) = (
+            self.rolling_elements,
+            self.ball_diameter_mm,
+            self.pitch_diameter_mm,
+        ) else {
+            return Err(
+                "give rolling_elements, ball_diameter_mm and pitch_diameter_mm (or \
+                 the four defect orders bpfo, bpfi, bsf, ftf)"
+                    .into(),
+            );
+        };
+        let beta = self.contact_angle_deg.unwrap_or(0.0);
+        if n == 0 || !(d > 0.0 && p > d && (0.0..90.0).contains(&beta)) {
+            return Err(
+                "needs at least one rolling element, 0 < ball diameter < pitch \
+                 diameter and a contact angle in [0, 90) degrees"
+                    .into(),
+            );
+        }
+        let r = d / p * beta.to_radians().cos();
+        let n = n as f64;
+        Ok(DefectOrders {
+            bpfo: 0.5 * n * (1.0 - r),
+            bpfi: 0.5 * n * (1.0 + r),
+            bsf: p / (2.0 * d) * (1.0 - r * r),
+            ftf: 0.5 * (1.0 - r),
+        })
+    }
 }
 
 /// Which mesh's relative acceleration the simulated sensor measures.

@@ -30,7 +30,7 @@ use sha2::{Digest, Sha256};
 
 pub use crate::error::GearboxError;
 pub use build::{AssumedValue, MeshValues, Physics};
-pub use description::{GearboxDescription, TextFormat};
+pub use description::{BearingSpec, DefectOrders, GearboxDescription, TextFormat};
 pub use kinematics::{Fixed, Kinematics, Stage, Topology};
 
 use crate::model::{Assembly, Wear};

@@ -47,7 +47,8 @@ use rustfft::num_complex::Complex64;
 use serde::{Deserialize, Serialize};
 
 use super::order::{
-    MeshTrackOptions, TrackSummary, angular_resample, samples_per_rev_for, track_mesh_phase_with,
+    MeshTrackOptions, ShaftAngle, TrackSummary, angular_resample, samples_per_rev_for,
+    track_mesh_phase_with,
 };
 use super::{PlanCache, Spectrum, check_min_len, check_samples};
 use crate::{Error, Result};
@@ -351,18 +352,30 @@ pub fn order_analysis(
     search: f64,
     spectrum: Option<&Spectrum>,
 ) -> Result<OrderAnalysis> {
-    let z_in = train.mesh_order;
     let angle = track_mesh_phase_with(
         x,
         fs,
         mesh_hz_hint,
-        z_in,
+        train.mesh_order,
         &MeshTrackOptions {
             search,
             ..Default::default()
         },
         spectrum,
     )?;
+    order_analysis_at(x, fs, train, &angle)
+}
+
+/// The TSA and its metrics for every shaft of `train`, with the input shaft's angle already
+/// known (a tachometer's, or a track shared by the channels of one record).
+///
+/// Errors: `x` and the track of different lengths; every shaft skipped is not an error.
+pub fn order_analysis_at(
+    x: &[f64],
+    fs: f64,
+    train: &ShaftTrain,
+    angle: &ShaftAngle,
+) -> Result<OrderAnalysis> {
     let input = train.input_shaft.clone();
     let usable_revs = angle.summary.revolutions;
     let mut shafts = Vec::new();
@@ -413,7 +426,7 @@ pub fn order_analysis(
             ));
             continue;
         }
-        let res = angular_resample(x, &angle, ratio, p)?;
+        let res = angular_resample(x, angle, ratio, p)?;
         let avg = tsa(&res.samples, p)?;
         let (metrics, signals) = gear_metrics_and_signals(&avg, &orders)?;
         if *name == input {
@@ -448,7 +461,7 @@ pub fn order_analysis(
     }
     Ok(OrderAnalysis {
         tracked_shaft: input,
-        tracking: angle.summary,
+        tracking: angle.summary.clone(),
         sync_share,
         shafts,
         skipped,

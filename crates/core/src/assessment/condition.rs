@@ -1,0 +1,245 @@
+//! The condition-monitoring part of an assessment ([`crate::condition`]): the record's
+//! measured operating state (once per record), each channel's order-domain evidence, its
+//! score against the machine's state-aware baseline and the findings.
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+
+use super::{Machine, RecordFacts};
+use crate::condition::{
+    Finding, OperatingState, Parts, StateBaseline, StateRecord, StateScore, Tacho, evidence,
+    findings, measure,
+};
+use crate::novelty::{FeatureZ, MachineBaseline, Novelty, OrderAnalysis, RecordFeatures};
+use crate::record::Record;
+use crate::signal::order::ShaftAngle;
+use crate::signal::tsa::order_analysis_at;
+use crate::{Error, Result};
+
+/// A record's tachometer channel: its name among the record's channels and its pulses per
+/// input-shaft revolution.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TachoChannel {
+    pub name: String,
+    pub pulses_per_rev: usize,
+}
+
+/// The record's measured state, shared by its channels.
+#[derive(Debug, Clone, Default)]
+pub struct Measured {
+    pub angle: Option<ShaftAngle>,
+    pub state: Option<OperatingState>,
+    /// Why there is no state (a tacho-less track that failed, no hint).
+    pub note: Option<String>,
+}
+
+/// How a channel's record compares with the state's baseline.
+#[derive(Debug, Clone, Serialize)]
+pub struct StateJudgement {
+    /// `same-state`, `interpolated` or `nearest`.
+    pub reference: &'static str,
+    /// Speeds (Hz) of the baseline records the reference comes from.
+    pub reference_hz: Vec<f64>,
+    pub score: f64,
+    pub threshold: f64,
+}
+
+/// Measure the record's state: from its tachometer channel when the machine or the request
+/// names one, else tacho-less on the first chosen channel around the speed hint (a described
+/// gearbox only: the track follows a mesh line of known order).
+///
+/// Errors: a named tachometer channel that is absent or gives too few pulses (the sender's
+/// data is wrong); a tacho-less track that fails is a note, not an error.
+pub fn measure_record(
+    channels: &[(String, Vec<f64>)],
+    chosen: &[usize],
+    facts: &RecordFacts,
+    machine: &Machine,
+) -> Result<Measured> {
+    let fs = facts.sample_rate_hz;
+    if let Some(t) = &facts.tacho {
+        let Some((_, samples)) = channels.iter().find(|(n, _)| *n == t.name) else {
+            let names: Vec<&str> = channels.iter().map(|(n, _)| n.as_str()).collect();
+            return Err(Error::Signal(format!(
+                "the tachometer channel `{}` is not in the record (its channels: {}); name the \
+                 tachometer's column",
+                t.name,
+                names.join(", ")
+            )));
+        };
+        let tacho = Tacho {
+            samples,
+            pulses_per_rev: t.pulses_per_rev,
+        };
+        let angle = measure(
+            samples,
+            fs,
+            machine.gearbox,
+            Some(tacho),
+            None,
+            facts.load.clone(),
+        )
+        .map_err(|e| Error::Signal(format!("tachometer channel `{}`: {e}", t.name)))?;
+        let (angle, mut state) = angle;
+        state.hint_hz = facts.shaft_hz.or(machine.input_shaft_hz);
+        return Ok(Measured {
+            angle: Some(angle),
+            state: Some(state),
+            note: None,
+        });
+    }
+    if !machine.described {
+        return Ok(Measured::default());
+    }
+    let hint = facts
+        .shaft_hz
+        .or(machine.input_shaft_hz)
+        .or(machine.gearbox.description.nominal_input_hz);
+    let x = &channels[chosen[0]].1;
+    Ok(
+        match measure(x, fs, machine.gearbox, None, hint, facts.load.clone()) {
+            Ok((angle, state)) => Measured {
+                angle: Some(angle),
+                state: Some(state),
+                note: None,
+            },
+            Err(e) => Measured {
+                note: Some(format!("the shaft rate could not be measured: {e}")),
+                ..Default::default()
+            },
+        },
+    )
+}
+
+/// The channel's per-shaft TSA from the measured angle (a described gearbox only).
+pub fn order_at(rec: &Record, machine: &Machine, m: &Measured) -> Option<OrderAnalysis> {
+    let angle = m.angle.as_ref()?;
+    if !machine.described {
+        return None;
+    }
+    order_analysis_at(
+        &rec.samples,
+        rec.sample_rate,
+        &machine.gearbox.shaft_train(),
+        angle,
+    )
+    .ok()
+}
+
+/// Add the state and the evidence to a channel's features (with a measured angle and a
+/// described gearbox).
+pub fn add_evidence(
+    features: &mut RecordFeatures,
+    rec: &Record,
+    machine: &Machine,
+    m: &Measured,
+    order: Option<&OrderAnalysis>,
+) {
+    features.state = m.state.clone();
+    let (Some(angle), true) = (&m.angle, machine.described) else {
+        return;
+    };
+    match evidence(
+        &rec.samples,
+        rec.sample_rate,
+        angle,
+        &Parts::of(machine.gearbox),
+        order,
+    ) {
+        Ok(ev) => features.evidence = ev,
+        Err(e) => {
+            if let Some(o) = features.indicators.as_object_mut() {
+                o.insert("evidence_error".into(), e.to_string().into());
+            }
+        }
+    }
+}
+
+/// A channel judged against its state-aware baseline: the score as a [`Novelty`] (what the
+/// alert policy reads), the judgement and the findings; `Err` says which state the baseline
+/// lacks.
+pub fn judge(
+    baseline: &StateBaseline,
+    features: &RecordFeatures,
+    machine: &Machine,
+) -> Option<std::result::Result<(Novelty, StateJudgement, Vec<Finding>), String>> {
+    let state = features.state.as_ref()?;
+    if features.evidence.is_empty() {
+        return None;
+    }
+    Some(baseline.score(state, &features.evidence).map(|s| {
+        let found = findings(&s, &Parts::of(machine.gearbox));
+        (novelty_of(&s, baseline), judgement_of(&s), found)
+    }))
+}
+
+fn novelty_of(s: &StateScore, b: &StateBaseline) -> Novelty {
+    Novelty {
+        score: s.score,
+        threshold: s.threshold,
+        anomalous: s.anomalous,
+        baseline_records: b.records(),
+        top_features: s
+            .departures
+            .iter()
+            .take(5)
+            .map(|d| FeatureZ {
+                name: d.feature.clone(),
+                z: d.z,
+            })
+            .collect(),
+        features_used: s.departures.len(),
+    }
+}
+
+fn judgement_of(s: &StateScore) -> StateJudgement {
+    StateJudgement {
+        reference: s.reference,
+        reference_hz: s.reference_hz.clone(),
+        score: s.score,
+        threshold: s.threshold,
+    }
+}
+
+/// The state-aware baseline of one channel from its baseline records' features: `None`
+/// when fewer than [`crate::condition::baseline::MIN_STATE_RECORDS`] carry a state and
+/// evidence (the channel then keeps the pooled baseline only).
+pub fn state_baseline(features: &[RecordFeatures]) -> Option<Result<StateBaseline>> {
+    let recs: Vec<StateRecord> = features
+        .iter()
+        .filter(|f| !f.evidence.is_empty())
+        .filter_map(|f| {
+            Some(StateRecord {
+                state: f.state.clone()?,
+                values: f.evidence.clone(),
+            })
+        })
+        .collect();
+    (recs.len() >= crate::condition::baseline::MIN_STATE_RECORDS).then(|| StateBaseline::fit(recs))
+}
+
+/// A machine's baselines from its baseline records' features by channel: the pooled one and,
+/// where the records carry states, the state-aware one; with the records per channel.
+///
+/// Errors: a channel with fewer records than a baseline needs.
+#[allow(clippy::type_complexity)]
+pub fn fit_baselines(
+    by_channel: &BTreeMap<String, Vec<RecordFeatures>>,
+) -> Result<(
+    BTreeMap<String, MachineBaseline>,
+    BTreeMap<String, StateBaseline>,
+    BTreeMap<String, usize>,
+)> {
+    let mut pooled = BTreeMap::new();
+    let mut states = BTreeMap::new();
+    let mut counts = BTreeMap::new();
+    for (name, feats) in by_channel {
+        pooled.insert(name.clone(), MachineBaseline::fit(feats)?);
+        if let Some(b) = state_baseline(feats) {
+            states.insert(name.clone(), b?);
+        }
+        counts.insert(name.clone(), feats.len());
+    }
+    Ok((pooled, states, counts))
+}

@@ -1,0 +1,439 @@
+//! A baseline that knows operating states: healthy records, each with its measured speed and
+//! load, and what they expect of a record **at its state**.
+//!
+//! # Reference at a state (chosen before looking at any score)
+//! The candidates are the baseline records of the record's load (all records when the record
+//! or the baseline has no load). Among them, by measured input-shaft rate `f`:
+//! 1. records within [`SAME_STATE`] (3 %) of `f` → their mean, feature by feature;
+//! 2. else, two records on either side of `f` no more than [`MAX_GAP`] apart (ratio 1.5) →
+//!    linear interpolation in `ln f`;
+//! 3. else the nearest record if within [`NEAR`] (8 %);
+//! 4. else the state is **not covered**, and the answer says which state is missing.
+//!
+//! Nearest healthy records, not a fitted curve of speed: a line's amplitude crosses
+//! resonances as the speed changes, which no low-order curve follows, and a baseline usually
+//! holds one or two records per state (the helical data: one per speed and load).
+//!
+//! # Scale and threshold (leave-one-out that respects states)
+//! Each baseline record is predicted from the others (rules 1–2, else the nearest record of
+//! its load at any distance): its **whole state** is left out with it, so the prediction
+//! comes from other speeds whenever the baseline has one record per state. Per feature, the
+//! scale is `max(1.4826 · MAD, 0.1)` of these residuals (the 0.1 floor: a 10 % change); a
+//! record's `z` per feature is `(value − reference) / scale`, its **score** the RMS of its
+//! [`TOP_K`] largest `|z|` (as [`crate::novelty`]). The **threshold** is the largest
+//! leave-one-out score (at least 3). The leave-one-out residuals include the change from one
+//! speed to the next, which a record judged at a covered state does not have: the scale and
+//! threshold err towards missing a small change rather than raising a false alarm.
+
+use serde::{Deserialize, Serialize};
+
+use super::state::{Load, OperatingState};
+use crate::novelty::{MIN_THRESHOLD, SCALE_FLOOR, TOP_K};
+use crate::signal::median;
+use crate::{Error, Result};
+use std::collections::BTreeMap;
+
+/// Records within this relative speed difference are at the same state.
+pub const SAME_STATE: f64 = 0.03;
+/// Largest ratio of the two speeds an interpolation may span.
+pub const MAX_GAP: f64 = 1.5;
+/// A single nearest record counts within this relative speed difference.
+pub const NEAR: f64 = 0.08;
+/// Fewest baseline records with a state.
+pub const MIN_STATE_RECORDS: usize = 3;
+
+/// A healthy record: its state and evidence features.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StateRecord {
+    pub state: OperatingState,
+    pub values: BTreeMap<String, f64>,
+}
+
+/// What a baseline covers at one load.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LoadCoverage {
+    /// `null`: records without a load.
+    pub load: Option<Load>,
+    pub records: usize,
+    /// Measured speeds (Hz), sorted.
+    pub speeds_hz: Vec<f64>,
+    pub min_hz: f64,
+    pub max_hz: f64,
+}
+
+/// A baseline's coverage of operating states.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Coverage {
+    pub records: usize,
+    pub loads: Vec<LoadCoverage>,
+}
+
+/// The expected features at a state and how they were obtained.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Reference {
+    pub values: BTreeMap<String, f64>,
+    /// Speeds (Hz) of the baseline records it comes from.
+    pub from_hz: Vec<f64>,
+    /// `same-state`, `interpolated` or `nearest`.
+    pub how: &'static str,
+}
+
+/// One feature's departure from the reference.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Departure {
+    pub feature: String,
+    /// `value − reference` (ln units: a ratio).
+    pub change: f64,
+    pub z: f64,
+}
+
+/// A record judged against its state's reference.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StateScore {
+    pub score: f64,
+    pub threshold: f64,
+    pub anomalous: bool,
+    /// `same-state`, `interpolated` or `nearest`.
+    pub reference: &'static str,
+    /// Baseline speeds (Hz) the reference comes from.
+    pub reference_hz: Vec<f64>,
+    /// Every feature's departure, largest `|z|` first.
+    #[serde(skip)]
+    pub departures: Vec<Departure>,
+    /// The [`TOP_K`] largest, for people.
+    pub top: Vec<Departure>,
+}
+
+/// A state-aware baseline (see the [module docs](self)).
+#[derive(Debug, Clone, PartialEq)]
+pub struct StateBaseline {
+    records: Vec<StateRecord>,
+    scale: BTreeMap<String, f64>,
+    threshold: f64,
+    loo_scores: Vec<f64>,
+}
+
+fn candidates<'a>(records: &'a [StateRecord], load: Option<&Load>) -> Vec<&'a StateRecord> {
+    let with_load = |r: &&StateRecord| match (load, &r.state.load) {
+        (Some(a), Some(b)) => a.same(b),
+        _ => true,
+    };
+    let mut v: Vec<&StateRecord> = records.iter().filter(with_load).collect();
+    v.sort_by(|a, b| a.state.shaft_hz.total_cmp(&b.state.shaft_hz));
+    v
+}
+
+fn mean_of(recs: &[&StateRecord]) -> BTreeMap<String, f64> {
+    let mut sum: BTreeMap<String, (f64, usize)> = BTreeMap::new();
+    for r in recs {
+        for (k, v) in &r.values {
+            let e = sum.entry(k.clone()).or_default();
+            e.0 += v;
+            e.1 += 1;
+        }
+    }
+    sum.into_iter()
+        .filter(|(_, (_, n))| *n == recs.len())
+        .map(|(k, (s, n))| (k, s / n as f64))
+        .collect()
+}
+
+/// The reference at speed `f` from sorted candidates; `any_distance`: fall back to the nearest
+/// whatever its distance (leave-one-out).
+fn reference(cands: &[&StateRecord], f: f64, any_distance: bool) -> Option<Reference> {
+    let rel = |r: &StateRecord| (r.state.shaft_hz / f - 1.0).abs();
+    let same: Vec<&StateRecord> = cands
+        .iter()
+        .copied()
+        .filter(|r| rel(r) <= SAME_STATE)
+        .collect();
+    if !same.is_empty() {
+        return Some(Reference {
+            values: mean_of(&same),
+            from_hz: same.iter().map(|r| r.state.shaft_hz).collect(),
+            how: "same-state",
+        });
+    }
+    let below = cands.iter().rev().find(|r| r.state.shaft_hz < f);
+    let above = cands.iter().find(|r| r.state.shaft_hz > f);
+    if let (Some(a), Some(b)) = (below, above)
+        && b.state.shaft_hz / a.state.shaft_hz <= MAX_GAP
+    {
+        let (fa, fb) = (a.state.shaft_hz.ln(), b.state.shaft_hz.ln());
+        let w = (f.ln() - fa) / (fb - fa);
+        let values = a
+            .values
+            .iter()
+            .filter_map(|(k, va)| b.values.get(k).map(|vb| (k.clone(), va + w * (vb - va))))
+            .collect();
+        return Some(Reference {
+            values,
+            from_hz: vec![a.state.shaft_hz, b.state.shaft_hz],
+            how: "interpolated",
+        });
+    }
+    let nearest = cands.iter().min_by(|a, b| rel(a).total_cmp(&rel(b)))?;
+    (any_distance || rel(nearest) <= NEAR).then(|| Reference {
+        values: nearest.values.clone(),
+        from_hz: vec![nearest.state.shaft_hz],
+        how: "nearest",
+    })
+}
+
+impl StateBaseline {
+    /// Fit from healthy records with their states (at least [`MIN_STATE_RECORDS`]).
+    pub fn fit(records: Vec<StateRecord>) -> Result<StateBaseline> {
+        if records.len() < MIN_STATE_RECORDS {
+            return Err(Error::Signal(format!(
+                "a state-aware baseline needs at least {MIN_STATE_RECORDS} healthy records with \
+                 a measured speed; it has {}",
+                records.len()
+            )));
+        }
+        let residuals: Vec<BTreeMap<String, f64>> = (0..records.len())
+            .map(|i| Self::loo_residual(&records, i))
+            .collect();
+        let mut per: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+        for r in &residuals {
+            for (k, v) in r {
+                per.entry(k.clone()).or_default().push(*v);
+            }
+        }
+        let scale: BTreeMap<String, f64> = per
+            .into_iter()
+            .filter(|(_, v)| v.len() >= MIN_STATE_RECORDS)
+            .map(|(k, mut v)| {
+                let m = median(&mut v);
+                let mut dev: Vec<f64> = v.iter().map(|x| (x - m).abs()).collect();
+                (k, (1.4826 * median(&mut dev)).max(SCALE_FLOOR))
+            })
+            .collect();
+        let loo_scores: Vec<f64> = residuals
+            .iter()
+            .map(|r| score_of(&departures(r, &scale)))
+            .collect();
+        let threshold = loo_scores.iter().fold(MIN_THRESHOLD, |a, &b| a.max(b));
+        Ok(StateBaseline {
+            records,
+            scale,
+            threshold,
+            loo_scores,
+        })
+    }
+
+    /// Record `i`'s residual from a reference made without its state.
+    fn loo_residual(records: &[StateRecord], i: usize) -> BTreeMap<String, f64> {
+        let me = &records[i];
+        let f = me.state.shaft_hz;
+        let others: Vec<StateRecord> = records
+            .iter()
+            .enumerate()
+            .filter(|(j, r)| {
+                *j != i
+                    && !((r.state.shaft_hz / f - 1.0).abs() <= SAME_STATE
+                        && match (&r.state.load, &me.state.load) {
+                            (Some(a), Some(b)) => a.same(b),
+                            _ => true,
+                        })
+            })
+            .map(|(_, r)| r.clone())
+            .collect();
+        let cands = candidates(&others, me.state.load.as_ref());
+        match reference(&cands, f, true) {
+            Some(r) => residual(&me.values, &r.values),
+            None => BTreeMap::new(),
+        }
+    }
+
+    /// The records' coverage, by load.
+    pub fn coverage(&self) -> Coverage {
+        let mut loads: Vec<LoadCoverage> = Vec::new();
+        for r in &self.records {
+            let f = r.state.shaft_hz;
+            match loads.iter_mut().find(|l| match (&l.load, &r.state.load) {
+                (Some(a), Some(b)) => a.same(b),
+                (None, None) => true,
+                _ => false,
+            }) {
+                Some(l) => {
+                    l.records += 1;
+                    l.speeds_hz.push(f);
+                }
+                None => loads.push(LoadCoverage {
+                    load: r.state.load.clone(),
+                    records: 1,
+                    speeds_hz: vec![f],
+                    min_hz: f,
+                    max_hz: f,
+                }),
+            }
+        }
+        for l in &mut loads {
+            l.speeds_hz.sort_by(f64::total_cmp);
+            l.min_hz = l.speeds_hz[0];
+            l.max_hz = l.speeds_hz[l.speeds_hz.len() - 1];
+        }
+        Coverage {
+            records: self.records.len(),
+            loads,
+        }
+    }
+
+    /// The expected features at `state`; `Err` says which state the baseline lacks.
+    pub fn reference(&self, state: &OperatingState) -> std::result::Result<Reference, String> {
+        let cands = candidates(&self.records, state.load.as_ref());
+        let at_load = match &state.load {
+            Some(l) => format!("at load {l}"),
+            None => "at any load".into(),
+        };
+        if cands.is_empty() {
+            let loads: Vec<String> = self
+                .coverage()
+                .loads
+                .iter()
+                .map(|l| l.load.as_ref().map_or("(none)".into(), |l| l.to_string()))
+                .collect();
+            return Err(format!(
+                "the baseline has no healthy record {at_load} (its loads: {}); add healthy \
+                 records at this load",
+                loads.join(", ")
+            ));
+        }
+        reference(&cands, state.shaft_hz, false).ok_or_else(|| {
+            let speeds: Vec<String> = cands
+                .iter()
+                .map(|r| format!("{:.1}", r.state.shaft_hz))
+                .collect();
+            format!(
+                "the baseline has no healthy record {at_load} near {:.2} Hz (its speeds {at_load}: \
+                 {} Hz); add a healthy record at this speed and load",
+                state.shaft_hz,
+                speeds.join(", ")
+            )
+        })
+    }
+
+    /// Judge a record's features at its state; `Err` as [`StateBaseline::reference`].
+    pub fn score(
+        &self,
+        state: &OperatingState,
+        values: &BTreeMap<String, f64>,
+    ) -> std::result::Result<StateScore, String> {
+        let r = self.reference(state)?;
+        let d = departures(&residual(values, &r.values), &self.scale);
+        let score = score_of(&d);
+        Ok(StateScore {
+            score,
+            threshold: self.threshold,
+            anomalous: score > self.threshold,
+            reference: r.how,
+            reference_hz: r.from_hz,
+            top: d.iter().take(TOP_K).cloned().collect(),
+            departures: d,
+        })
+    }
+
+    pub fn threshold(&self) -> f64 {
+        self.threshold
+    }
+
+    /// The baseline records' leave-one-out scores (record order).
+    pub fn loo_scores(&self) -> &[f64] {
+        &self.loo_scores
+    }
+
+    pub fn records(&self) -> usize {
+        self.records.len()
+    }
+}
+
+fn residual(
+    values: &BTreeMap<String, f64>,
+    reference: &BTreeMap<String, f64>,
+) -> BTreeMap<String, f64> {
+    values
+        .iter()
+        .filter_map(|(k, v)| reference.get(k).map(|r| (k.clone(), v - r)))
+        .collect()
+}
+
+/// Departures with their z (features with a scale only), largest `|z|` first.
+fn departures(residual: &BTreeMap<String, f64>, scale: &BTreeMap<String, f64>) -> Vec<Departure> {
+    let mut d: Vec<Departure> = residual
+        .iter()
+        .filter_map(|(k, c)| {
+            scale.get(k).map(|s| Departure {
+                feature: k.clone(),
+                change: *c,
+                z: c / s,
+            })
+        })
+        .collect();
+    d.sort_by(|a, b| b.z.abs().total_cmp(&a.z.abs()));
+    d
+}
+
+fn score_of(d: &[Departure]) -> f64 {
+    let top: Vec<f64> = d.iter().take(TOP_K).map(|x| x.z * x.z).collect();
+    if top.is_empty() {
+        return 0.0;
+    }
+    (top.iter().sum::<f64>() / top.len() as f64).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::condition::state::SpeedSource;
+
+    fn rec(f: f64, load: &str, v: f64) -> StateRecord {
+        StateRecord {
+            state: OperatingState {
+                shaft_hz: f,
+                source: SpeedSource::Tachometer,
+                hint_hz: None,
+                speed_variation: 0.0,
+                load: Load::parse(load),
+            },
+            values: BTreeMap::from([("a".to_string(), v), ("b".to_string(), 0.0)]),
+        }
+    }
+
+    /// Feature `a` rises with speed (ln a = ln f) at each load; a record at a covered state
+    /// with the same law scores low, one 3 scales up is anomalous, and a state outside the
+    /// baseline is refused naming what is missing.
+    #[test]
+    fn judges_at_the_state_and_names_the_missing_one() {
+        let mut recs = Vec::new();
+        for f in [30.0, 35.0, 40.0, 45.0, 50.0] {
+            for (l, off) in [("High", 0.5), ("Low", 0.0)] {
+                recs.push(rec(f, l, f64::ln(f) + off + 0.01 * (f % 7.0)));
+            }
+        }
+        let b = StateBaseline::fit(recs).unwrap();
+        let cov = b.coverage();
+        assert_eq!(cov.loads.len(), 2);
+        assert_eq!(cov.loads[0].speeds_hz, vec![30.0, 35.0, 40.0, 45.0, 50.0]);
+        let st = |f: f64, l: &str| rec(f, l, 0.0).state;
+        let ok = b
+            .score(
+                &st(37.5, "high"),
+                &BTreeMap::from([("a".into(), f64::ln(37.5) + 0.5)]),
+            )
+            .unwrap();
+        assert!(!ok.anomalous, "{ok:?}");
+        assert_eq!(ok.reference, "interpolated");
+        let bad = b
+            .score(
+                &st(40.3, "Low"),
+                &BTreeMap::from([("a".into(), f64::ln(40.0) + 1.5)]),
+            )
+            .unwrap();
+        assert!(bad.anomalous, "{bad:?} {}", b.threshold());
+        assert_eq!(bad.reference, "same-state");
+        let e = b.score(&st(60.0, "Low"), &BTreeMap::new()).unwrap_err();
+        assert!(e.contains("near 60.00 Hz") && e.contains("load Low"), "{e}");
+        let e = b.score(&st(40.0, "Medium"), &BTreeMap::new()).unwrap_err();
+        assert!(e.contains("load Medium") && e.contains("High"), "{e}");
+    }
+}

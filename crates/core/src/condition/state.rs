@@ -1,0 +1,201 @@
+//! A record's operating state: the input shaft's **measured** rate and the load.
+//!
+//! The rate is never taken on trust. With a tachometer it is counted from the pulses
+//! ([`track_tachometer`]); without one it is tracked tacho-less from the phase of the
+//! strongest stage-1 mesh harmonic found within [`TACHO_LESS_SEARCH`] of the nominal hint
+//! ([`track_mesh_phase`]): induction motors slip a few per cent below their setting, so the
+//! hint only says where to look.
+
+use serde::{Deserialize, Serialize};
+
+use crate::gearbox::Gearbox;
+use crate::signal::order::{MeshTrackOptions, ShaftAngle, track_mesh_phase, track_tachometer};
+use crate::{Error, Result};
+
+/// Relative half-width of the tacho-less search around the hint: motor slip (2–3 % at full
+/// load) and a setting that is a little off.
+pub const TACHO_LESS_SEARCH: f64 = 0.06;
+
+/// A load as its user names it: a label (`"High"`) or a number (N·m, %, any unit the user
+/// keeps to).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Load {
+    Value(f64),
+    Label(String),
+}
+
+impl Load {
+    /// A number when the text reads as one, else a label (trimmed). Empty text: no load.
+    pub fn parse(text: &str) -> Option<Load> {
+        let t = text.trim();
+        if t.is_empty() {
+            return None;
+        }
+        Some(match t.parse::<f64>() {
+            Ok(v) if v.is_finite() => Load::Value(v),
+            _ => Load::Label(t.to_string()),
+        })
+    }
+
+    /// The same load: labels equal up to case, numbers within 5 % (or 1e-9 absolute).
+    pub fn same(&self, other: &Load) -> bool {
+        match (self, other) {
+            (Load::Label(a), Load::Label(b)) => a.eq_ignore_ascii_case(b),
+            (Load::Value(a), Load::Value(b)) => {
+                (a - b).abs() <= 1e-9 || (a - b).abs() <= 0.05 * a.abs().max(b.abs())
+            }
+            _ => false,
+        }
+    }
+}
+
+impl std::fmt::Display for Load {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Load::Value(v) => write!(f, "{v}"),
+            Load::Label(s) => f.write_str(s),
+        }
+    }
+}
+
+/// How the shaft rate was obtained.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SpeedSource {
+    /// Counted from a tachometer channel's pulses.
+    Tachometer,
+    /// Tracked from a mesh line's phase near the nominal hint.
+    TachoLess,
+}
+
+/// A record's operating state.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OperatingState {
+    /// Measured mean input-shaft rate (Hz).
+    pub shaft_hz: f64,
+    pub source: SpeedSource,
+    /// The nominal rate the search started from (Hz), when there was one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hint_hz: Option<f64>,
+    /// (max − min) / mean of the per-revolution rate over the record.
+    pub speed_variation: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub load: Option<Load>,
+}
+
+/// A tachometer channel: its samples and pulses per input-shaft revolution.
+#[derive(Debug, Clone, Copy)]
+pub struct Tacho<'a> {
+    pub samples: &'a [f64],
+    pub pulses_per_rev: usize,
+}
+
+/// Measure the input shaft's angle and the record's state: from `tacho` when given, else
+/// tacho-less on `x` around `hint_hz` (the stage-1 mesh order of `gearbox`).
+///
+/// Errors: a tachometer with too few pulses or a wrong rate; no tachometer and no hint; a
+/// mesh line too weak to track.
+pub fn measure(
+    x: &[f64],
+    fs: f64,
+    gearbox: &Gearbox,
+    tacho: Option<Tacho>,
+    hint_hz: Option<f64>,
+    load: Option<Load>,
+) -> Result<(ShaftAngle, OperatingState)> {
+    let hint_hz = hint_hz.filter(|h| h.is_finite() && *h > 0.0);
+    let (angle, source) = match tacho {
+        Some(t) => (
+            track_tachometer(t.samples, fs, t.pulses_per_rev)?,
+            SpeedSource::Tachometer,
+        ),
+        None => {
+            let h = hint_hz.ok_or_else(|| {
+                Error::Signal(
+                    "the shaft rate cannot be measured: give a tachometer channel (with its \
+                     pulses per revolution) or the nominal input-shaft rate (--shaft-hz, \
+                     ?shaft_hz=, or the machine's input_shaft_hz) to search around"
+                        .into(),
+                )
+            })?;
+            let z = gearbox.f1_per_input_hz;
+            let opts = MeshTrackOptions {
+                search: TACHO_LESS_SEARCH,
+                ..Default::default()
+            };
+            (
+                track_mesh_phase(x, fs, z * h, z, &opts)?,
+                SpeedSource::TachoLess,
+            )
+        }
+    };
+    let state = OperatingState {
+        shaft_hz: angle.summary.mean_hz,
+        source,
+        hint_hz,
+        speed_variation: angle.summary.speed_variation,
+        load,
+    };
+    Ok((angle, state))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn loads_parse_and_compare() {
+        assert_eq!(Load::parse(" High "), Some(Load::Label("High".into())));
+        assert_eq!(Load::parse("40"), Some(Load::Value(40.0)));
+        assert_eq!(Load::parse(""), None);
+        assert!(
+            Load::parse("high")
+                .unwrap()
+                .same(&Load::parse("HIGH").unwrap())
+        );
+        assert!(Load::Value(100.0).same(&Load::Value(104.0)));
+        assert!(!Load::Value(100.0).same(&Load::Value(120.0)));
+        assert!(!Load::Value(1.0).same(&Load::Label("1".into())));
+    }
+
+    /// A 10-pulse tachometer at 37.3 Hz and a record of its 16th order: the tachometer gives
+    /// the rate to 0.1 %, and tacho-less tracking from a hint 4 % high finds the same rate.
+    #[test]
+    fn tachometer_and_tacho_less_agree() {
+        let gb = Gearbox::parse(
+            "format = \"gearwear-gearbox\"\nversion = 1\nname = \"t\"\ninput_shaft = \"in\"\n\
+             [[stage]]\nkind = \"parallel\"\npinion = { shaft = \"in\", teeth = 16 }\n\
+             gear = { shaft = \"out\", teeth = 48 }\n",
+            "test",
+        )
+        .unwrap();
+        let fs = 20_000.0;
+        let f = 37.3;
+        let n = 40_000;
+        let t = |i: usize| i as f64 / fs;
+        let tach: Vec<f64> = (0..n)
+            .map(|i| {
+                if (t(i) * f * 10.0).fract() < 0.2 {
+                    5.0
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let x: Vec<f64> = (0..n)
+            .map(|i| (std::f64::consts::TAU * 16.0 * f * t(i)).sin())
+            .collect();
+        let tacho = Tacho {
+            samples: &tach,
+            pulses_per_rev: 10,
+        };
+        let (_, s) = measure(&x, fs, &gb, Some(tacho), None, None).unwrap();
+        assert_eq!(s.source, SpeedSource::Tachometer);
+        assert!((s.shaft_hz / f - 1.0).abs() < 1e-3, "{s:?}");
+        let (_, s) = measure(&x, fs, &gb, None, Some(f * 1.04), None).unwrap();
+        assert_eq!(s.source, SpeedSource::TachoLess);
+        assert!((s.shaft_hz / f - 1.0).abs() < 1e-3, "{s:?}");
+        assert!(measure(&x, fs, &gb, None, None, None).is_err());
+    }
+}
