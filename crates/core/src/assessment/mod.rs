@@ -285,7 +285,7 @@ fn assess_channel(
         .get(&name)
         .and_then(|b| condition::judge(b, &features, machine));
     let (novelty, state, findings, uncovered) = match judged {
-        Some(Ok((n, j, f))) => (Some(n), Some(j), f, None),
+        Some(Ok(j)) => (Some(j.novelty), Some(j.judgement), j.findings, None),
         Some(Err(missing)) => (None, None, Vec::new(), Some(missing)),
         None => (
             machine.baselines.get(&name).map(|b| b.score(&features)),
