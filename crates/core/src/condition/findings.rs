@@ -13,6 +13,9 @@
 //!   is commensurate with it. With an impulsive sign (a TSA impulsiveness metric of s or the
 //!   envelope at s's rate) it is `gear-local-damage` (a chipped, cracked or broken tooth hits
 //!   once per revolution); with sidebands alone `gear-eccentricity`.
+//!   A gear finding on a shaft whose rate is a whole multiple of another shaft's with a gear
+//!   finding is dropped: the slower shaft's comb contains all its lines, and the slower shaft's
+//!   own lines rose.
 //! * **shaft s** — its 1× and 2× lines: `shaft`, detail "imbalance or bent shaft" (1×),
 //!   "misalignment" (2×), "bent shaft or misalignment" (both). A shaft finding **explains**
 //!   sidebands at its own rate: a `gear-eccentricity` on the same shaft that is not stronger
@@ -278,6 +281,21 @@ fn bearing_finding(name: &str, shaft: &str, up: &[&Departure]) -> Option<Finding
     })
 }
 
+/// Drop a gear finding on a shaft whose rate is a whole multiple of the rate of another shaft
+/// that has a gear finding too: every line of the faster shaft is also a line of the slower
+/// one, so the slower shaft, whose own lines rose, explains both.
+fn drop_nested(gears: &mut Vec<Finding>, parts: &Parts) {
+    let rate = |f: &Finding| f.shaft.as_ref().and_then(|s| parts.shafts.get(s)).copied();
+    let slower: Vec<f64> = gears.iter().filter_map(rate).collect();
+    gears.retain(|f| {
+        let Some(rt) = rate(f) else { return true };
+        !slower.iter().any(|&rs| {
+            let k = rt / rs;
+            rs < rt * (1.0 - 1e-9) && (k - k.round()).abs() < 1e-6
+        })
+    });
+}
+
 /// The findings of a record judged against its state (none when it is not anomalous).
 pub fn findings(score: &StateScore, parts: &Parts) -> Vec<Finding> {
     if !score.anomalous {
@@ -305,6 +323,7 @@ pub fn findings(score: &StateScore, parts: &Parts) -> Vec<Finding> {
             }
         }
     }
+    drop_nested(&mut out, parts);
     out.extend(shafts);
     out.extend(
         parts
@@ -426,6 +445,26 @@ mod tests {
                 .all(|x| x.gear.as_ref().is_none_or(|g| g.teeth != 48))
         );
         assert_eq!(f[0].evidence[0].change, "+5.2 dB");
+    }
+
+    /// The input turns 3 × the idler: lines at the input's rate are also idler harmonics, so
+    /// with the idler's own lines up the idler explains both.
+    #[test]
+    fn the_slower_commensurate_shaft_explains_the_faster_ones_lines() {
+        let f = findings(
+            &score(
+                true,
+                &[
+                    ("env.in", 8.0),
+                    ("mesh1.h1.sb.in", 7.0),
+                    ("mesh2.h1.sb.idler", 5.0),
+                    ("env.idler", 4.0),
+                ],
+            ),
+            &parts(),
+        );
+        assert!(f.iter().all(|x| x.shaft.as_deref() != Some("in")), "{f:?}");
+        assert_eq!(f[0].shaft.as_deref(), Some("idler"), "{f:?}");
     }
 
     #[test]
