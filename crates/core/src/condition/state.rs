@@ -30,7 +30,8 @@ pub const TRACK_SEARCH: f64 = 0.005;
 /// `i`, under 0.45 × the sample rate), each read as the largest bin within one bin of where it
 /// should be. The step keeps the highest line within half a bin between candidates.
 ///
-/// Errors: the record's spectrum's (bad samples or rate).
+/// Errors: the record's spectrum's (bad samples or rate); no mesh line under 0.45 × the
+/// sample rate.
 pub fn comb_rate(x: &[f64], fs: f64, gearbox: &Gearbox, hint_hz: f64) -> Result<f64> {
     let spec = amplitude_spectrum(x, fs, Window::Hann)?;
     let df = spec.resolution();
@@ -47,7 +48,13 @@ pub fn comb_rate(x: &[f64], fs: f64, gearbox: &Gearbox, hint_hz: f64) -> Result<
         hint_hz * (1.0 + TACHO_LESS_SEARCH),
     );
     orders.retain(|o| o * hi < 0.45 * fs);
-    let top = orders.last().copied().unwrap_or(1.0);
+    let Some(&top) = orders.last() else {
+        return Err(Error::Signal(format!(
+            "no mesh line of this gearbox lies under 0.45 × the sample rate ({:.0} Hz) near \
+             {hint_hz:.2} Hz: the rate cannot be found tacho-less; give a tachometer channel",
+            0.45 * fs
+        )));
+    };
     let step = 0.5 * df / top;
     let score = |f: f64| -> f64 {
         orders
