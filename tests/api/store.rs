@@ -197,12 +197,18 @@ async fn baseline_marks_touch_only_the_machine_s_records(b: Backend) {
         gearbox_id: Some("gb".into()),
         input_shaft_hz: Some(29.5),
         channels: Some(vec!["a1".into(), "a2".into()]),
+        tacho_channel: Some("speed".into()),
+        tacho_ppr: 60,
     };
     assert!(st.put_machine(&cfg, 5).await.unwrap());
     assert!(!st.put_machine(&cfg, 6).await.unwrap());
     let m = st.get_machine("m3").await.unwrap().unwrap();
     assert_eq!(m.gearbox_id.as_deref(), Some("gb"));
     assert_eq!(m.channels, Some(vec!["a1".to_string(), "a2".to_string()]));
+    assert_eq!(
+        (m.tacho_channel.as_deref(), m.tacho_ppr),
+        (Some("speed"), 60)
+    );
     assert_eq!((m.record_count, m.alert_level.as_str()), (0, "unknown"));
     st.close().await;
 }
@@ -271,6 +277,7 @@ fn ingest(machine: &str, idem: Option<&str>, t: i64) -> Ingest {
             status: 201,
             response: "{}".into(),
         }),
+        event_extras: Default::default(),
     }
 }
 
