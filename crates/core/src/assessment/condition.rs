@@ -159,6 +159,7 @@ pub fn add_evidence(
 /// A channel judged against its state-aware baseline: the score as a [`Novelty`] (what the
 /// alert policy reads), the judgement and the findings; `Err` says which state the baseline
 /// lacks.
+#[allow(clippy::type_complexity)]
 pub fn judge(
     baseline: &StateBaseline,
     features: &RecordFeatures,
