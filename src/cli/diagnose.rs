@@ -8,7 +8,9 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 
 use super::baseline::{self, BaselineFile, Loaded};
-use super::common::{RigArgs, default_table_for, load_table, parse_range, progress_bar};
+use super::common::{
+    RigArgs, default_table_for, load_gearbox, load_table, parse_range, progress_bar,
+};
 use crate::analysis::bifurcation::grid;
 use crate::assessment::{
     GearboxRef, Machine, MachineCalibration, RecordFacts, TableDiagnoser, TachoChannel, Thresholds,
@@ -261,7 +263,6 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
     if !(a.warning_ea < a.alarm_ea) {
         bail!("--warning-ea must be below --alarm-ea");
     }
-    let table = load_table(a.gearbox.as_deref(), a.table.as_deref(), a.allow_stale)?;
     let opts = ReadOptions {
         format: a.format.map(|f| match f {
             FormatArg::Csv => Format::Csv,
@@ -272,25 +273,27 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
         column: None,
     };
     let calibration = a.calibration.as_deref().map(read_calibration).transpose()?;
-    let diagnoser = TableDiagnoser::new(
-        table,
-        DiagnoseOptions {
-            credible_level: a.level,
-            ..Default::default()
-        },
-    )?;
-    let gearbox = diagnoser.table().gearbox();
+    let (diagnoser, table_note) = table_for(&a)?;
+    let described = match (&diagnoser, &a.gearbox) {
+        (None, Some(p)) => Some(load_gearbox(Some(p))?),
+        _ => None,
+    };
+    let gearbox = match (&diagnoser, &described) {
+        (Some(d), _) => d.table().gearbox(),
+        (None, Some(gb)) => gb,
+        (None, None) => bail!("give --gearbox or --table"),
+    };
     let load = a.load.as_deref().and_then(Load::parse);
     let no_baseline = BTreeMap::new();
     let no_states = BTreeMap::new();
     let no_counts = BTreeMap::new();
     let mut machine = Machine {
         gearbox,
-        gearbox_ref: gearbox_ref(&a, gearbox),
+        gearbox_ref: gearbox_ref(&a, gearbox, diagnoser.is_some()),
         // Order tracking needs the gearbox's tooth counts: only with a description.
         described: a.gearbox.is_some(),
-        diagnoser: Some(&diagnoser),
-        table_note: None,
+        diagnoser: diagnoser.as_ref(),
+        table_note,
         input_shaft_hz: None,
         baselines: &no_baseline,
         state_baselines: &no_states,
@@ -331,7 +334,7 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
 
 /// The `gearbox` object of the answer: the description file's stem, the built-in rig's id, or
 /// the table's gearbox name.
-fn gearbox_ref(a: &DiagnoseArgs, gearbox: &crate::gearbox::Gearbox) -> GearboxRef {
+fn gearbox_ref(a: &DiagnoseArgs, gearbox: &crate::gearbox::Gearbox, table: bool) -> GearboxRef {
     GearboxRef {
         id: match &a.gearbox {
             Some(p) => p
@@ -345,9 +348,43 @@ fn gearbox_ref(a: &DiagnoseArgs, gearbox: &crate::gearbox::Gearbox) -> GearboxRe
         },
         name: gearbox.name().to_string(),
         hash: gearbox.hash.clone(),
-        table_status: "ready".into(),
-        table_progress: 1.0,
+        table_status: if table { "ready" } else { "missing" }.into(),
+        table_progress: if table { 1.0 } else { 0.0 },
     }
+}
+
+/// The signature table's diagnoser, or — for a described gearbox whose default table does
+/// not exist yet, with a baseline to judge the record — none, with the note that says why
+/// there is no wear figure and how to get one.
+fn table_for(a: &DiagnoseArgs) -> Result<(Option<TableDiagnoser>, Option<String>)> {
+    let table = match load_table(a.gearbox.as_deref(), a.table.as_deref(), a.allow_stale) {
+        Ok(t) => t,
+        Err(e) => {
+            let baseline = !a.baseline.is_empty() || a.baseline_manifest.is_some();
+            let Some(g) = a
+                .gearbox
+                .as_deref()
+                .filter(|_| a.table.is_none() && baseline)
+            else {
+                return Err(e);
+            };
+            let note = format!(
+                "no wear figure: {e:#}; the record is judged against its baseline only (make \
+                 the table with `gearwear precompute --gearbox {} --input-hz LO:HI:STEP` over \
+                 the machine's speeds)",
+                g.display()
+            );
+            return Ok((None, Some(note)));
+        }
+    };
+    let diagnoser = TableDiagnoser::new(
+        table,
+        DiagnoseOptions {
+            credible_level: a.level,
+            ..Default::default()
+        },
+    )?;
+    Ok((Some(diagnoser), None))
 }
 
 fn facts_of(rec: &Loaded, shaft_hz: Option<f64>, load: Option<Load>, healthy: bool) -> RecordFacts {

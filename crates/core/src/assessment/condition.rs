@@ -156,22 +156,29 @@ pub fn add_evidence(
     }
 }
 
-/// A channel judged against its state-aware baseline: the score as a [`Novelty`] (what the
-/// alert policy reads), the judgement and the findings; `Err` says which state the baseline
-/// lacks.
-#[allow(clippy::type_complexity)]
+/// A channel judged against its state-aware baseline.
+pub struct Judged {
+    /// The score as a [`Novelty`]: what the alert policy reads.
+    pub novelty: Novelty,
+    pub judgement: StateJudgement,
+    pub findings: Vec<Finding>,
+}
+
+/// A channel judged against its state-aware baseline (`None` without a measured state and
+/// evidence); `Err` says which state the baseline lacks.
 pub fn judge(
     baseline: &StateBaseline,
     features: &RecordFeatures,
     machine: &Machine,
-) -> Option<std::result::Result<(Novelty, StateJudgement, Vec<Finding>), String>> {
+) -> Option<std::result::Result<Judged, String>> {
     let state = features.state.as_ref()?;
     if features.evidence.is_empty() {
         return None;
     }
-    Some(baseline.score(state, &features.evidence).map(|s| {
-        let found = findings(&s, &Parts::of(machine.gearbox));
-        (novelty_of(&s, baseline), judgement_of(&s), found)
+    Some(baseline.score(state, &features.evidence).map(|s| Judged {
+        findings: findings(&s, &Parts::of(machine.gearbox)),
+        novelty: novelty_of(&s, baseline),
+        judgement: judgement_of(&s),
     }))
 }
 

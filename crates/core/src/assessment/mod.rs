@@ -6,8 +6,14 @@
 //! One function, [`assess`], builds it for the service (`POST …/records`) and for
 //! `gearwear diagnose`, so both give the same answer for the same record, baseline and
 //! calibration. The [`Assessment`] serialises to the diagnosis object of the API (the deciding
-//! channel's diagnosis fields, then `calibration`, `channel`, `channels`, `gearbox`, `novelty`,
-//! `baseline`, `indicators`, `alert`).
+//! channel's diagnosis fields, then `calibration`, `channel`, `channels`, `gearbox`,
+//! `operating_state`, `state_note`, `findings`, `novelty`, `state_reference`, `baseline`,
+//! `indicators`, `alert`).
+//!
+//! With a described gearbox the record's operating state is measured once ([`condition`]:
+//! tachometer, else tacho-less) and every channel's order-domain evidence computed from it; a
+//! channel whose baseline records carry states is judged against them at the record's state
+//! ([`crate::condition`]), with findings, instead of against the pooled baseline.
 
 pub mod alert;
 pub mod condition;
@@ -285,7 +291,7 @@ fn assess_channel(
         .get(&name)
         .and_then(|b| condition::judge(b, &features, machine));
     let (novelty, state, findings, uncovered) = match judged {
-        Some(Ok((n, j, f))) => (Some(n), Some(j), f, None),
+        Some(Ok(j)) => (Some(j.novelty), Some(j.judgement), j.findings, None),
         Some(Err(missing)) => (None, None, Vec::new(), Some(missing)),
         None => (
             machine.baselines.get(&name).map(|b| b.score(&features)),

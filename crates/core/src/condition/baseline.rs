@@ -16,14 +16,16 @@
 //!
 //! # Scale and threshold (leave-one-out that respects states)
 //! Each baseline record is predicted from the others (rules 1–2, else the nearest record of
-//! its load at any distance): its **whole state** is left out with it, so the prediction
-//! comes from other speeds whenever the baseline has one record per state. Per feature, the
+//! its load at any distance): from the other records of its state when it has some (their
+//! spread is the repeatability), else from neighbouring speeds (a baseline of one record per
+//! state: the spread then includes the change between speeds). Per feature, the
 //! scale is `max(1.4826 · MAD, 0.1)` of these residuals (the 0.1 floor: a 10 % change); a
 //! record's `z` per feature is `(value − reference) / scale`, its **score** the RMS of its
 //! [`TOP_K`] largest `|z|` (as [`crate::novelty`]). The **threshold** is the largest
-//! leave-one-out score (at least 3). The leave-one-out residuals include the change from one
-//! speed to the next, which a record judged at a covered state does not have: the scale and
-//! threshold err towards missing a small change rather than raising a false alarm.
+//! leave-one-out score (at least 3). With one record per state, the leave-one-out residuals
+//! include the change from one speed to the next, which a record judged at a covered state
+//! does not have: the scale and threshold then err towards missing a small change rather
+//! than raising a false alarm.
 
 use serde::{Deserialize, Serialize};
 
@@ -221,21 +223,14 @@ impl StateBaseline {
         })
     }
 
-    /// Record `i`'s residual from a reference made without its state.
+    /// Record `i`'s residual from a reference made without it.
     fn loo_residual(records: &[StateRecord], i: usize) -> BTreeMap<String, f64> {
         let me = &records[i];
         let f = me.state.shaft_hz;
         let others: Vec<StateRecord> = records
             .iter()
             .enumerate()
-            .filter(|(j, r)| {
-                *j != i
-                    && !((r.state.shaft_hz / f - 1.0).abs() <= SAME_STATE
-                        && match (&r.state.load, &me.state.load) {
-                            (Some(a), Some(b)) => a.same(b),
-                            _ => true,
-                        })
-            })
+            .filter(|(j, _)| *j != i)
             .map(|(_, r)| r.clone())
             .collect();
         let cands = candidates(&others, me.state.load.as_ref());

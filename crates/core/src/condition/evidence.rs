@@ -10,16 +10,19 @@
 //! | feature | what it is | what raises it |
 //! | --- | --- | --- |
 //! | `mesh<i>.h<k>` | amplitude of the k-th harmonic of stage i's mesh | wear, load |
-//! | `mesh<i>.h<k>.sb.<s>` | RMS of the sidebands `k·O_i ± j·r_s`, j = 1..3, at shaft s's rate | a gear on s modulating the mesh: local damage, eccentricity |
+//! | `mesh<i>.h<k>.sb.<s>` | RMS of the sidebands `k·O_i ± j·r_s` at the first three multiples j of shaft s's rate that only s makes | a gear on s modulating the mesh: local damage, eccentricity |
 //! | `shaft.<s>.1x`, `.2x` | amplitude at 1× and 2× shaft s's rate | imbalance, bent shaft (1×), misalignment (2×) |
 //! | `tsa.<s>.fm4`, `na4`, `m6a`, `kurtosis`, `er` | metrics of s's time-synchronous average ([`crate::signal::tsa`]) | a once-per-revolution impact of a damaged tooth on s |
-//! | `env.<s>` | envelope spectrum at 1..3 × r_s | impacts once per revolution of s |
+//! | `env.<s>` | envelope spectrum at the first three multiples of r_s that only s makes | impacts once per revolution of s |
 //! | `bearing.<b>.<defect>` | envelope spectrum at 1..3 × the defect order (±1 %, rolling elements slip) | a bearing defect: `bpfo` outer race, `bpfi` inner race, `bsf` ball, `ftf` cage |
 //! | `env.level` | RMS of the envelope band | any impacting |
 //! | `stat.rms`, `stat.kurtosis` | of the raw record | anything |
 //!
-//! A sideband that falls within 1.5 bins of another shaft's first three orders or of any mesh
-//! harmonic is left out of its sum (it would be counted for the wrong part). The envelope band
+//! A line counts for a shaft only where no faster shaft also puts one ([`specific_to`]: in a
+//! train of commensurate rates, a slower shaft's comb contains the faster shafts' harmonics),
+//! and a sideband that falls on a mesh harmonic is left out (it would be counted for the
+//! wrong part). A bearing harmonic that a bearing of another shaft shares is left out of that
+//! bearing's sum for the same reason. The envelope band
 //! spans from 3.5 × the highest mesh order (above the mesh harmonics that dominate the raw
 //! spectrum) to 0.45 × the sample rate.
 
@@ -162,22 +165,42 @@ pub fn evidence(
     Ok(out)
 }
 
-/// Orders a sideband at `delta` of shaft `s` must stay clear of: the first three orders of
-/// every other shaft (as offsets) — and, as absolute orders, every mesh harmonic.
-fn sideband_clear(parts: &Parts, s: &str, delta: f64, centre: f64, bin: f64) -> bool {
-    let tol = 1.5 * bin;
-    let other_shaft = parts
+/// Is an offset `delta` (orders) a multiple of shaft `s`'s rate that **only** `s` makes? In
+/// a train whose rates are commensurate, a faster shaft's harmonics are also harmonics of a
+/// slower one (1 × the input rate is 3 × the idler's when they turn 3:1): a once-per-revolution
+/// impact on the slower shaft raises lines at every multiple of its rate, an impact on the
+/// faster one only at its own multiples. So a line counts for `s` when it is not (within 1.5
+/// bins) a multiple of any faster shaft's rate; the fastest shaft keeps all its multiples.
+fn specific_to(parts: &Parts, s: &str, delta: f64, bin: f64) -> bool {
+    let rs = parts.shafts[s];
+    parts
         .shafts
         .iter()
-        .filter(|(t, _)| t.as_str() != s)
-        .any(|(_, &rt)| (1..=3).any(|m| (m as f64 * rt - delta).abs() < tol));
-    let on_mesh = parts.meshes.iter().any(|&om| {
-        (1..=MESH_HARMONICS + 1).any(|k| {
-            let h = k as f64 * om;
-            (h - (centre + delta)).abs() < tol || (h - (centre - delta)).abs() < tol
+        .filter(|(t, rt)| t.as_str() != s && **rt > rs * (1.0 + 1e-9))
+        .all(|(_, &rt)| {
+            let m = (delta / rt).round();
+            m < 1.0 || (delta - m * rt).abs() > 1.5 * bin
         })
-    });
-    !other_shaft && !on_mesh
+}
+
+/// The first `n` multiples of shaft `s`'s rate that are [`specific_to`] it and, when read
+/// around `centre` (a mesh harmonic) as sidebands, do not land on a mesh harmonic.
+fn specific_offsets(parts: &Parts, s: &str, centre: f64, bin: f64, n: usize) -> Vec<f64> {
+    let rs = parts.shafts[s];
+    let on_mesh = |o: f64| {
+        centre > 0.0
+            && parts.meshes.iter().any(|&om| {
+                (1..=MESH_HARMONICS + 1).any(|k| {
+                    let h = k as f64 * om;
+                    (h - (centre + o)).abs() < 1.5 * bin || (h - (centre - o)).abs() < 1.5 * bin
+                })
+            })
+    };
+    (1..=4 * n)
+        .map(|j| j as f64 * rs)
+        .filter(|&d| specific_to(parts, s, d, bin) && !on_mesh(d))
+        .take(n)
+        .collect()
 }
 
 /// `mesh<i>.h<k>` and `mesh<i>.h<k>.sb.<s>` for every stage and every shaft carrying one of
@@ -196,10 +219,8 @@ fn mesh_features(spec: &Orders, parts: &Parts, put: &mut impl FnMut(String, Opti
             let c = k as f64 * om;
             put(format!("mesh{stage}.h{k}"), spec.peak(c, 0.0));
             for s in &shafts {
-                let rs = parts.shafts[*s];
-                let orders: Vec<f64> = (1..=SIDEBANDS)
-                    .map(|j| j as f64 * rs)
-                    .filter(|&d| sideband_clear(parts, s, d, c, spec.bin()))
+                let orders: Vec<f64> = specific_offsets(parts, s, c, spec.bin(), SIDEBANDS)
+                    .into_iter()
                     .flat_map(|d| [c - d, c + d])
                     .collect();
                 put(format!("mesh{stage}.h{k}.sb.{s}"), spec.rms_of(orders, 0.0));
@@ -246,12 +267,46 @@ fn envelope_features(
     let m = env.iter().sum::<f64>() / env.len() as f64;
     env.iter_mut().for_each(|v| *v -= m);
     let spec = Orders::new(&env, p, max_order)?;
-    for (s, &rs) in &parts.shafts {
-        let orders = (1..=3)
-            .map(|h| h as f64 * rs)
-            .filter(|&o| sideband_clear(parts, s, o, 0.0, spec.bin()) || o == rs);
+    for s in parts.shafts.keys() {
+        let orders = specific_offsets(parts, s, 0.0, spec.bin(), 3);
         put(format!("env.{s}"), spec.rms_of(orders, 0.0));
     }
+    let lines = bearing_lines(parts);
+    for (i, (bearing, name, shaft, orders)) in lines.iter().enumerate() {
+        // A harmonic that a bearing of another shaft also puts there (ER-10K bearings on
+        // shafts turning 3:1 share 3 · BPFI · r_idler = BPFI · r_in) would name the wrong one.
+        let own: Vec<f64> = orders
+            .iter()
+            .copied()
+            .filter(|&o| {
+                lines.iter().enumerate().all(|(j, other)| {
+                    j == i
+                        || other.2 == *shaft
+                        || other
+                            .3
+                            .iter()
+                            .all(|&p| (p - o).abs() > (BEARING_SLIP * o).max(1.5 * spec.bin()))
+                })
+            })
+            .collect();
+        put(
+            format!("bearing.{bearing}.{name}"),
+            spec.rms_of(own, BEARING_SLIP),
+        );
+    }
+    Ok(())
+}
+
+/// Relative tolerance of a bearing line (its rolling elements slip).
+const BEARING_SLIP: f64 = 0.01;
+
+/// A bearing's defect lines: bearing, defect, shaft, orders of harmonics 1..3.
+type BearingLine = (String, &'static str, String, Vec<f64>);
+
+/// Every described bearing's defect lines in input-shaft orders; the ball line is read at
+/// 2 × BSF (a ball defect strikes both races once per spin).
+fn bearing_lines(parts: &Parts) -> Vec<BearingLine> {
+    let mut v = Vec::new();
     for b in &parts.bearings {
         let rs = parts.shafts.get(&b.shaft).copied().unwrap_or(0.0);
         let o = &b.orders;
@@ -261,14 +316,11 @@ fn envelope_features(
             ("bsf", 2.0 * o.bsf),
             ("ftf", o.ftf),
         ] {
-            let orders = (1..=3).map(|h| h as f64 * d * rs);
-            put(
-                format!("bearing.{}.{name}", b.name),
-                spec.rms_of(orders, 0.01),
-            );
+            let orders = (1..=3).map(|h| h as f64 * d * rs).collect();
+            v.push((b.name.clone(), name, b.shaft.clone(), orders));
         }
     }
-    Ok(())
+    v
 }
 
 #[cfg(test)]
@@ -319,10 +371,10 @@ mod tests {
         let v = |k: &str| e[k].exp();
         assert!((v("mesh2.h1") - 1.0).abs() < 0.02, "{e:?}");
         assert!((v("mesh1.h1") - 0.5).abs() < 0.02, "{e:?}");
-        // j = 1 sidebands of 0.15 each, j = 2 empty, j = 3 left out (3 × 1/3 is the input
-        // shaft's 1×): RMS over 4 lines = 0.15/√2.
+        // j = 1 sidebands of 0.15 each; j = 2 and 4 empty; j = 3 left out (3 × 1/3 is the
+        // input shaft's 1×, not the idler's alone): RMS over 6 lines = 0.15/√3.
         let sb = v("mesh2.h1.sb.idler");
-        assert!((sb - 0.15 / 2f64.sqrt()).abs() < 0.005, "{sb} {e:?}");
+        assert!((sb - 0.15 / 3f64.sqrt()).abs() < 0.005, "{sb} {e:?}");
         assert!(v("mesh2.h1.sb.out") < 0.01 * sb, "{e:?}");
         assert!(v("mesh1.h1.sb.in") < 0.01 * sb, "{e:?}");
     }

@@ -6,11 +6,16 @@
 //! largest such `z`. Parts of strength at least [`MIN_STRENGTH`] become findings, strongest
 //! first. The rules, chosen from the physics before any score was seen:
 //!
-//! * **gear on shaft s, stage i** — sidebands at s's rate around mesh i's harmonics, the TSA
-//!   of s (FM4, NA4, M6A, kurtosis, energy ratio) and the envelope at s's rate. With an
-//!   impulsive sign (a TSA impulsiveness metric or the envelope at s's rate) it is
-//!   `gear-local-damage` (a chipped, cracked or broken tooth hits once per revolution);
-//!   with sidebands alone `gear-eccentricity`.
+//! * **gear on shaft s, stage i** — located by lines only s makes: sidebands at s's rate
+//!   around mesh i's harmonics and the envelope at s's rate (its strength comes from these).
+//!   The TSA of s (FM4, NA4, M6A, kurtosis, energy ratio) supports it but does not locate: an
+//!   impact once per revolution of one shaft also shows in the TSA of every shaft whose rate
+//!   is commensurate with it. With an impulsive sign (a TSA impulsiveness metric of s or the
+//!   envelope at s's rate) it is `gear-local-damage` (a chipped, cracked or broken tooth hits
+//!   once per revolution); with sidebands alone `gear-eccentricity`.
+//!   A gear finding on a shaft whose rate is a whole multiple of another shaft's with a gear
+//!   finding is dropped: the slower shaft's comb contains all its lines, and the slower shaft's
+//!   own lines rose.
 //! * **shaft s** — its 1× and 2× lines: `shaft`, detail "imbalance or bent shaft" (1×),
 //!   "misalignment" (2×), "bent shaft or misalignment" (both). A shaft finding **explains**
 //!   sidebands at its own rate: a `gear-eccentricity` on the same shaft that is not stronger
@@ -108,8 +113,11 @@ fn sorted(mut ev: Vec<Evidence>) -> Vec<Evidence> {
     ev
 }
 
-/// Why a feature points at gear `g`; `None` when it does not, `Some((why, impulsive))`.
-fn gear_reason(feature: &str, g: &GearPart) -> Option<(String, bool)> {
+/// Why a feature points at gear `g`; `None` when it does not, else `(why, impulsive,
+/// locates)`: `locates` for lines at multiples of the shaft's rate that only this shaft makes
+/// (sidebands, envelope), not for TSA metrics (an impact on one shaft also shows in the TSA
+/// of every shaft whose rate it is commensurate with).
+fn gear_reason(feature: &str, g: &GearPart) -> Option<(String, bool, bool)> {
     let s = &g.shaft;
     if let Some(rest) = feature.strip_prefix(&format!("mesh{}.h", g.stage))
         && let Some((k, shaft)) = rest.split_once(".sb.")
@@ -122,6 +130,7 @@ fn gear_reason(feature: &str, g: &GearPart) -> Option<(String, bool)> {
                 g.stage
             ),
             false,
+            true,
         ));
     }
     if let Some(m) = feature.strip_prefix(&format!("tsa.{s}.")) {
@@ -134,11 +143,12 @@ fn gear_reason(feature: &str, g: &GearPart) -> Option<(String, bool)> {
         } else {
             format!("more of `{s}`'s synchronous average is off the mesh lines (energy ratio)")
         };
-        return Some((why, impulsive));
+        return Some((why, impulsive, false));
     }
     (feature == format!("env.{s}")).then(|| {
         (
             format!("the envelope repeats at `{s}`'s rate: impacts once per revolution of `{s}`"),
+            true,
             true,
         )
     })
@@ -146,18 +156,31 @@ fn gear_reason(feature: &str, g: &GearPart) -> Option<(String, bool)> {
 
 fn gear_finding(g: &GearPart, up: &[&Departure]) -> Option<Finding> {
     let mut impulsive = false;
-    let ev: Vec<Evidence> = up
-        .iter()
-        .filter_map(|d| {
-            gear_reason(&d.feature, g).map(|(why, imp)| {
-                impulsive |= imp;
-                evidence(d, why)
-            })
-        })
-        .collect();
-    let ev = sorted(ev);
-    let st = strength(&ev);
-    (st >= MIN_STRENGTH).then(|| Finding {
+    let mut locating = Vec::new();
+    let mut support = Vec::new();
+    for d in up {
+        if let Some((why, imp, loc)) = gear_reason(&d.feature, g) {
+            impulsive |= imp;
+            if loc {
+                locating.push(evidence(d, why));
+            } else {
+                support.push(evidence(d, why));
+            }
+        }
+    }
+    let locating = sorted(locating);
+    let st = strength(&locating);
+    if st < MIN_STRENGTH {
+        return None;
+    }
+    let summary = format!(
+        "{} on shaft `{}`: {} {}",
+        g.label(),
+        g.shaft,
+        locating[0].why.split(':').next().unwrap_or_default(),
+        locating[0].change
+    );
+    Some(Finding {
         kind: if impulsive {
             "gear-local-damage"
         } else {
@@ -172,14 +195,8 @@ fn gear_finding(g: &GearPart, up: &[&Departure]) -> Option<Finding> {
         bearing: None,
         detail: None,
         strength: st,
-        summary: format!(
-            "{} on shaft `{}`: {} {}",
-            g.label(),
-            g.shaft,
-            ev[0].why.split(':').next().unwrap_or_default(),
-            ev[0].change
-        ),
-        evidence: ev,
+        summary,
+        evidence: locating.into_iter().chain(sorted(support)).collect(),
     })
 }
 
@@ -264,6 +281,21 @@ fn bearing_finding(name: &str, shaft: &str, up: &[&Departure]) -> Option<Finding
     })
 }
 
+/// Drop a gear finding on a shaft whose rate is a whole multiple of the rate of another shaft
+/// that has a gear finding too: every line of the faster shaft is also a line of the slower
+/// one, so the slower shaft, whose own lines rose, explains both.
+fn drop_nested(gears: &mut Vec<Finding>, parts: &Parts) {
+    let rate = |f: &Finding| f.shaft.as_ref().and_then(|s| parts.shafts.get(s)).copied();
+    let slower: Vec<f64> = gears.iter().filter_map(rate).collect();
+    gears.retain(|f| {
+        let Some(rt) = rate(f) else { return true };
+        !slower.iter().any(|&rs| {
+            let k = rt / rs;
+            rs < rt * (1.0 - 1e-9) && (k - k.round()).abs() < 1e-6
+        })
+    });
+}
+
 /// The findings of a record judged against its state (none when it is not anomalous).
 pub fn findings(score: &StateScore, parts: &Parts) -> Vec<Finding> {
     if !score.anomalous {
@@ -291,6 +323,7 @@ pub fn findings(score: &StateScore, parts: &Parts) -> Vec<Finding> {
             }
         }
     }
+    drop_nested(&mut out, parts);
     out.extend(shafts);
     out.extend(
         parts
@@ -339,4 +372,124 @@ pub fn findings(score: &StateScore, parts: &Parts) -> Vec<Finding> {
         out.sort_by(|a, b| b.strength.total_cmp(&a.strength));
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gearbox::Gearbox;
+
+    fn parts() -> Parts {
+        let gb = Gearbox::parse(
+            "format = \"gearwear-gearbox\"\nversion = 1\nname = \"h\"\ninput_shaft = \"in\"\n\
+             [[stage]]\nkind = \"parallel\"\npinion = { shaft = \"in\", teeth = 16 }\n\
+             gear = { shaft = \"idler\", teeth = 48 }\n\
+             [[stage]]\nkind = \"parallel\"\npinion = { shaft = \"idler\", teeth = 24 }\n\
+             gear = { shaft = \"out\", teeth = 40 }\n\
+             [[bearing]]\nname = \"b-out\"\nshaft = \"out\"\nbpfo = 3.05\nbpfi = 4.95\n\
+             bsf = 1.99\nftf = 0.38\n",
+            "test",
+        )
+        .unwrap();
+        Parts::of(&gb)
+    }
+
+    fn score(anomalous: bool, d: &[(&str, f64)]) -> StateScore {
+        let departures: Vec<Departure> = d
+            .iter()
+            .map(|(f, z)| Departure {
+                feature: f.to_string(),
+                change: 0.1 * z,
+                z: *z,
+            })
+            .collect();
+        StateScore {
+            score: 5.0,
+            threshold: 3.0,
+            anomalous,
+            reference: "same-state",
+            reference_hz: vec![40.0],
+            top: departures.iter().take(3).cloned().collect(),
+            departures,
+        }
+    }
+
+    #[test]
+    fn sidebands_at_the_idler_rate_and_an_impulsive_tsa_name_the_24_tooth_pinion() {
+        let f = findings(
+            &score(
+                true,
+                &[
+                    ("mesh2.h1.sb.idler", 6.0),
+                    ("mesh2.h3.sb.idler", 5.0),
+                    ("tsa.idler.fm4", 4.0),
+                ],
+            ),
+            &parts(),
+        );
+        assert_eq!(f[0].kind, "gear-local-damage", "{f:?}");
+        assert_eq!(f[0].shaft.as_deref(), Some("idler"));
+        assert_eq!(
+            f[0].gear,
+            Some(GearRef {
+                stage: 2,
+                member: "pinion",
+                teeth: 24
+            })
+        );
+        // Strength: RMS of the two locating z (the TSA supports, it does not locate).
+        assert!((f[0].strength - ((36.0 + 25.0) / 2.0f64).sqrt()).abs() < 1e-9);
+        assert!(f[0].summary.contains("24T") && f[0].summary.contains("`idler`"));
+        assert!(
+            f.iter()
+                .all(|x| x.gear.as_ref().is_none_or(|g| g.teeth != 48))
+        );
+        assert_eq!(f[0].evidence[0].change, "+5.2 dB");
+    }
+
+    /// The input turns 3 × the idler: lines at the input's rate are also idler harmonics, so
+    /// with the idler's own lines up the idler explains both.
+    #[test]
+    fn the_slower_commensurate_shaft_explains_the_faster_ones_lines() {
+        let f = findings(
+            &score(
+                true,
+                &[
+                    ("env.in", 8.0),
+                    ("mesh1.h1.sb.in", 7.0),
+                    ("mesh2.h1.sb.idler", 5.0),
+                    ("env.idler", 4.0),
+                ],
+            ),
+            &parts(),
+        );
+        assert!(f.iter().all(|x| x.shaft.as_deref() != Some("in")), "{f:?}");
+        assert_eq!(f[0].shaft.as_deref(), Some("idler"), "{f:?}");
+    }
+
+    #[test]
+    fn a_shaft_line_explains_sidebands_at_its_own_rate() {
+        let f = findings(
+            &score(true, &[("shaft.in.1x", 7.0), ("mesh1.h1.sb.in", 5.0)]),
+            &parts(),
+        );
+        assert_eq!(f.len(), 1, "{f:?}");
+        assert_eq!(f[0].kind, "shaft");
+        assert_eq!(f[0].detail.as_deref(), Some("imbalance or bent shaft"));
+    }
+
+    #[test]
+    fn bearing_lines_name_the_bearing_and_nothing_else_is_unexplained() {
+        let f = findings(&score(true, &[("bearing.b-out.bpfi", 6.0)]), &parts());
+        assert_eq!(f[0].kind, "bearing");
+        assert_eq!(f[0].bearing.as_deref(), Some("b-out"));
+        assert_eq!(f[0].detail.as_deref(), Some("inner race"));
+        let f = findings(
+            &score(true, &[("stat.rms", 9.0), ("env.level", 4.0)]),
+            &parts(),
+        );
+        assert_eq!(f.len(), 1);
+        assert_eq!(f[0].kind, "unexplained");
+        assert!(findings(&score(false, &[("mesh2.h1.sb.idler", 9.0)]), &parts()).is_empty());
+    }
 }

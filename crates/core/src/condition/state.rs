@@ -1,20 +1,71 @@
 //! A record's operating state: the input shaft's **measured** rate and the load.
 //!
 //! The rate is never taken on trust. With a tachometer it is counted from the pulses
-//! ([`track_tachometer`]); without one it is tracked tacho-less from the phase of the
-//! strongest stage-1 mesh harmonic found within [`TACHO_LESS_SEARCH`] of the nominal hint
-//! ([`track_mesh_phase`]): induction motors slip a few per cent below their setting, so the
-//! hint only says where to look.
+//! ([`track_tachometer`]). Without one it is found in two steps: first the rate within
+//! [`TACHO_LESS_SEARCH`] of the nominal hint at which the gearbox's whole comb of mesh lines
+//! (every stage's mesh order × 1..3) is strongest ([`comb_rate`]: induction motors slip a few
+//! per cent below their setting, so the hint only says where to look, and one line alone is
+//! easily confused with a sideband in a dense spectrum); then the input shaft's angle is
+//! tracked from the phase of the strongest stage-1 mesh harmonic within
+//! [`TRACK_SEARCH`] of that rate ([`track_mesh_phase`]), or, when no line can be followed,
+//! held at that rate ([`constant_rate_angle`]).
 
 use serde::{Deserialize, Serialize};
 
 use crate::gearbox::Gearbox;
-use crate::signal::order::{MeshTrackOptions, ShaftAngle, track_mesh_phase, track_tachometer};
+use crate::signal::order::{
+    MeshTrackOptions, ShaftAngle, constant_rate_angle, track_mesh_phase, track_tachometer,
+};
+use crate::signal::{Window, amplitude_spectrum};
 use crate::{Error, Result};
 
 /// Relative half-width of the tacho-less search around the hint: motor slip (2–3 % at full
 /// load) and a setting that is a little off.
 pub const TACHO_LESS_SEARCH: f64 = 0.06;
+/// Relative half-width of the phase tracker's search around the comb's rate.
+pub const TRACK_SEARCH: f64 = 0.005;
+
+/// The input-shaft rate (Hz) within `hint · (1 ± TACHO_LESS_SEARCH)` that maximises the sum of
+/// the log amplitudes of the gearbox's mesh lines (orders `k · O_i`, k = 1..3, every stage
+/// `i`, under 0.45 × the sample rate), each read as the largest bin within one bin of where it
+/// should be. The step keeps the highest line within half a bin between candidates.
+///
+/// Errors: the record's spectrum's (bad samples or rate).
+pub fn comb_rate(x: &[f64], fs: f64, gearbox: &Gearbox, hint_hz: f64) -> Result<f64> {
+    let spec = amplitude_spectrum(x, fs, Window::Hann)?;
+    let df = spec.resolution();
+    let mut orders: Vec<f64> = gearbox
+        .shaft_train()
+        .meshes
+        .iter()
+        .flat_map(|o| (1..=3).map(move |k| k as f64 * o))
+        .collect();
+    orders.sort_by(f64::total_cmp);
+    orders.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    let (lo, hi) = (
+        hint_hz * (1.0 - TACHO_LESS_SEARCH),
+        hint_hz * (1.0 + TACHO_LESS_SEARCH),
+    );
+    orders.retain(|o| o * hi < 0.45 * fs);
+    let top = orders.last().copied().unwrap_or(1.0);
+    let step = 0.5 * df / top;
+    let score = |f: f64| -> f64 {
+        orders
+            .iter()
+            .map(|o| {
+                let (_, a) = spec.peak_near(o * f, df);
+                (a.max(1e-300)).ln()
+            })
+            .sum()
+    };
+    let n = ((hi - lo) / step).ceil() as usize;
+    let best = (0..=n)
+        .map(|i| lo + i as f64 * step)
+        .map(|f| (f, score(f)))
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .map_or(hint_hz, |b| b.0);
+    Ok(best)
+}
 
 /// A load as its user names it: a label (`"High"`) or a number (N·m, %, any unit the user
 /// keeps to).
@@ -120,14 +171,15 @@ pub fn measure(
                 )
             })?;
             let z = gearbox.f1_per_input_hz;
+            let rate = comb_rate(x, fs, gearbox, h)?;
             let opts = MeshTrackOptions {
-                search: TACHO_LESS_SEARCH,
+                search: TRACK_SEARCH,
                 ..Default::default()
             };
-            (
-                track_mesh_phase(x, fs, z * h, z, &opts)?,
-                SpeedSource::TachoLess,
-            )
+            // A line too weak to follow: the comb's rate, held constant.
+            let angle = track_mesh_phase(x, fs, z * rate, z, &opts)
+                .unwrap_or_else(|_| constant_rate_angle(x.len(), fs, rate));
+            (angle, SpeedSource::TachoLess)
         }
     };
     let state = OperatingState {

@@ -81,6 +81,8 @@ pub enum TrackMethod {
     MeshPhase,
     /// A tachometer channel's pulses.
     Tachometer,
+    /// A constant rate found in the spectrum (the phase of no line could be followed).
+    ConstantRate,
 }
 
 /// The angle of the tracked shaft at every sample of a record.
@@ -657,6 +659,28 @@ pub fn track_tachometer(tacho: &[f64], fs: f64, pulses_per_rev: usize) -> Result
             harmonic: None,
         },
     })
+}
+
+/// The angle of a shaft turning at a constant `rate_hz` over `n` samples at `fs`: the fallback
+/// when no line's phase can be followed (a steady machine, whose speed varies by a fraction of
+/// a per cent over a record).
+pub fn constant_rate_angle(n: usize, fs: f64, rate_hz: f64) -> ShaftAngle {
+    let revs: Vec<f64> = (0..n).map(|i| i as f64 * rate_hz / fs).collect();
+    ShaftAngle {
+        revs,
+        sample_rate: fs,
+        usable: (0, n.saturating_sub(1)),
+        summary: TrackSummary {
+            method: TrackMethod::ConstantRate,
+            mean_hz: rate_hz,
+            speed_variation: 0.0,
+            speed_std: 0.0,
+            revolutions: n.saturating_sub(1) as f64 * rate_hz / fs,
+            mesh_hz: None,
+            mesh_order: None,
+            harmonic: None,
+        },
+    }
 }
 
 /// A record resampled in the angle domain of one shaft.
