@@ -30,12 +30,13 @@ const SECONDS: f64 = 1.5;
 const PPR: usize = 10;
 
 /// The machine's three channels at input rate `input_hz` (Hz), everything locked to the input
-/// shaft's angle θ (a random start angle per `seed`): `tacho` a clean 0/5 V square wave of
-/// [`PPR`] pulses a revolution (no noise: a TTL tachometer's two levels, which a vibration
-/// channel would be refused for as clipped); `a1` and `a2` the stage-1 (16θ) and stage-2 (8θ)
-/// mesh tones with two harmonics each, a few per cent of modulation by the shafts carrying
-/// each gear (in: θ, idler: θ/3, out: θ/5), small shaft lines and noise. `idler_damage` adds
-/// a ringing impulse once per revolution of the idler shaft, as a cracked tooth on it would.
+/// shaft's angle θ (a random start angle per `seed`): `tacho` a square wave of [`PPR`]
+/// pulses a revolution whose pulses sit exactly at the 5 V rail between noisy lows (an open
+/// collector pulled up: a vibration channel like that is refused as clipped); `a1` and `a2`
+/// the stage-1 (16θ) and stage-2 (8θ) mesh tones with two harmonics each, a few per cent of
+/// modulation by the shafts carrying each gear (in: θ, idler: θ/3, out: θ/5), small shaft
+/// lines and noise. `idler_damage` adds a ringing impulse once per revolution of the idler
+/// shaft, as a cracked tooth on it would.
 fn channels(input_hz: f64, seed: u64, idler_damage: bool) -> [(&'static str, Vec<f64>); 3] {
     let n = (FS * SECONDS) as usize;
     let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(11);
@@ -57,7 +58,8 @@ fn channels(input_hz: f64, seed: u64, idler_damage: bool) -> [(&'static str, Vec
     for i in 0..n {
         let th = TAU * input_hz * i as f64 / FS + theta0;
         let pulse = (PPR as f64 * th / TAU).fract() < 0.3;
-        out[0].push(if pulse { 5.0 } else { 0.0 });
+        let low = round(0.02 * (uniform() - 0.5));
+        out[0].push(if pulse { 5.0 } else { low });
         let (idler, output) = (th / 3.0, th / 5.0);
         let ring = if idler_damage {
             let since = (idler / TAU).fract() / (input_hz / 3.0);
@@ -440,6 +442,17 @@ async fn a_tachometer_machine_is_judged_at_its_operating_state(b: Backend) {
     assert_eq!(s, 201, "{csv}");
     assert_state(&csv, 40.0, "high");
     assert_eq!(csv["alert"]["level"], "ok", "{}", csv["alert"]);
+
+    // The same pulses in a channel that is not the tachometer: a clipped vibration channel.
+    let mut renamed = record(40.0, 108, false, None);
+    let pulses = renamed["channels"]["tacho"].take();
+    let chans = renamed["channels"].as_object_mut().unwrap();
+    chans.remove("tacho");
+    chans.insert("speed".into(), pulses);
+    let (s, p) = post(&app, "gb-2", "", &renamed).await;
+    assert_eq!(s, 422, "{p}");
+    assert_eq!(p["type"], "urn:gearwear:problem:clipped-record", "{p}");
+    assert!(p["detail"].as_str().unwrap().contains("speed"), "{p}");
 
     // A machine that names no tachometer: a channel named `tacho` is one, its pulses per
     // revolution from the query (the machine's default is 1).

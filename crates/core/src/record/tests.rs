@@ -54,13 +54,20 @@ fn check_signal_refuses_empty_nan_flat_and_clipped() {
     ));
 }
 
-/// A TTL tachometer's square wave holds its two levels for many samples in a row: refused as
-/// clipped by `check_signal`, accepted as a pulse train by `check_pulses` (which still refuses
-/// a flat channel), and only for the channel named as the tachometer.
+/// A tachometer's pulses sit at the supply rail (an open collector pulled up to 5 V: exactly
+/// 5.0 for many samples in a row) between noisy lows: refused as clipped by `check_signal`,
+/// accepted as a pulse train by `check_pulses` (which still refuses a flat channel), and only
+/// for the channel named as the tachometer.
 #[test]
 fn a_tachometer_square_wave_is_a_pulse_train_not_a_clipped_record() {
     let square: Vec<f64> = (0..20_000)
-        .map(|i| if (i % 50) < 15 { 5.0 } else { 0.0 })
+        .map(|i| {
+            if (i % 50) < 15 {
+                5.0
+            } else {
+                0.02 * (i as f64 * 0.37).sin()
+            }
+        })
         .collect();
     assert!(matches!(
         check_signal(&square),
