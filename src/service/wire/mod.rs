@@ -314,7 +314,7 @@ impl Decoded {
 /// Decode and validate a record body of `format` (JSON body fields win over the query),
 /// the same for every endpoint that takes a record. The channel named `pulses` (the
 /// machine's tachometer, when the record has it) is checked as a pulse train
-/// ([`crate::record::check_pulses`]): a square wave is not a clipped record.
+/// ([`crate::record::check_pulses`]): pulses at a supply rail are not a clipped record.
 pub fn decode(
     format: BodyFormat,
     q: &RecordQuery,

@@ -124,9 +124,10 @@ pub fn check_signal(x: &[f64]) -> Result<()> {
 }
 
 /// The checks of a tachometer's pulse train: [`check_signal`] without the clipping rule. A
-/// TTL tachometer writes two levels, each held for many samples in a row, by design: that is
-/// a clean pulse train, not a saturated sensor. Empty, non-finite and flat samples are still
-/// refused (a flat channel has no pulse to count).
+/// tachometer's pulses often sit exactly at a supply rail (an open collector pulled up to
+/// 5 V) for many samples in a row while the other level is noisy: the clipping rule's
+/// signature, yet a clean pulse train, not a saturated sensor. Empty, non-finite and flat
+/// samples are still refused (a flat channel has no pulse to count).
 pub fn check_pulses(x: &[f64]) -> Result<()> {
     match check_signal(x) {
         Err(Error::ClippedRecord { .. }) => Ok(()),

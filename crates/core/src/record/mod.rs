@@ -193,8 +193,8 @@ pub fn parse_record_channels(
 }
 
 /// [`parse_record_channels`], except that the channel named `pulses` (a tachometer's, when
-/// the record has it) passes [`check_pulses`] instead of [`check_signal`]: a TTL square wave
-/// is not a clipped record.
+/// the record has it) passes [`check_pulses`] instead of [`check_signal`]: pulses at a
+/// supply rail are not a clipped record.
 pub fn parse_record_channels_with_pulses(
     bytes: &[u8],
     format: Format,
