@@ -7,6 +7,7 @@
 //! reports as a crash; a parser that panics by itself is a crash too. See
 //! `docs/reliability/fuzzing.md`.
 
+use gearwear::condition::Load;
 use gearwear::configuration::{Limits, Settings};
 use gearwear::gearbox::Gearbox;
 use gearwear::model::Wear;
@@ -77,6 +78,14 @@ pub fn check_decoded(d: &Decoded, limits: &Limits, body_len: usize, what: &str) 
     );
     if let Some(s) = d.shaft_hz {
         assert!(s.is_finite(), "{what}: shaft_hz {s} accepted");
+    }
+    match &d.load {
+        Some(Load::Label(l)) => assert!(
+            !l.is_empty() && l.chars().count() <= 100,
+            "{what}: load label {l:?} accepted"
+        ),
+        Some(Load::Value(v)) => assert!(v.is_finite(), "{what}: load {v} accepted"),
+        None => {}
     }
     if let Some(s) = &d.sensor {
         assert!(
@@ -240,7 +249,9 @@ fn service_binary(format: BodyFormat, data: &[u8]) {
     for query in [None, Some("sample_rate_hz=25600")] {
         let q = parse_query(query).expect("a fixed valid query");
         let what = format!("service {format:?} {query:?}");
-        match decode(format, &q, data, &limits) {
+        // A channel named `tacho` is checked as a pulse train, as the service does for a
+        // machine that names no tachometer.
+        match decode(format, &q, data, &limits, Some("tacho")) {
             Ok(d) => {
                 check_decoded(&d, &limits, data.len(), &what);
                 if query.is_some() {
@@ -265,7 +276,7 @@ pub fn json_body(data: &[u8]) {
     for query in [None, Some("shaft_hz=30&sensor=fuzz")] {
         let q = parse_query(query).expect("a fixed valid query");
         let what = format!("json {query:?}");
-        match decode(BodyFormat::Json, &q, data, &limits) {
+        match decode(BodyFormat::Json, &q, data, &limits, Some("tacho")) {
             Ok(d) => {
                 check_decoded(&d, &limits, data.len(), &what);
                 let n: usize = d.channels.iter().map(|c| c.1.len()).sum();
@@ -316,6 +327,12 @@ pub fn json_fast_path_agrees(data: &[u8]) {
                     assert!(ulps(x, y) <= 1, "json: shaft_hz {x} vs {y}: {}", body())
                 }
                 (x, y) => assert_eq!(x, y, "json: shaft_hz: {}", body()),
+            }
+            match (&a.load, &b.load) {
+                (Some(Load::Value(x)), Some(Load::Value(y))) => {
+                    assert!(ulps(*x, *y) <= 1, "json: load {x} vs {y}: {}", body())
+                }
+                (x, y) => assert_eq!(x, y, "json: load: {}", body()),
             }
             // The `channels` form always goes through serde_json: equal, not within an ulp.
             assert_eq!(a.channels, b.channels, "json: channels: {}", body());

@@ -33,6 +33,13 @@ pub struct SetArgs {
     /// Channel names the machine records, comma-separated (default: whatever a record brings).
     #[arg(long, value_delimiter = ',')]
     pub channels: Option<Vec<String>>,
+    /// The record channel of the machine's tachometer (default: a channel named `tacho`, when
+    /// a record has one); it gives the measured speed and is not diagnosed.
+    #[arg(long, value_name = "NAME")]
+    pub tacho_channel: Option<String>,
+    /// Tachometer pulses per input-shaft revolution.
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    pub tacho_ppr: i64,
     #[command(flatten)]
     pub store: StoreArgs,
 }
@@ -51,6 +58,18 @@ pub fn run(a: MachineArgs) -> Result<()> {
                 && !(hz.is_finite() && hz > 0.0 && hz <= 1000.0)
             {
                 bail!("--input-shaft-hz must be a rate in Hz above 0 and at most 1000, got {hz}");
+            }
+            if let Err(e) = crate::service::machines::check_tacho(
+                s.tacho_channel.as_deref(),
+                s.tacho_ppr,
+                s.channels.as_deref(),
+            ) {
+                bail!(
+                    "{}",
+                    e.replace("`tacho_channel`", "--tacho-channel")
+                        .replace("`tacho_ppr`", "--tacho-ppr")
+                        .replace("`channels`", "--channels")
+                );
             }
             let url = s.store.database_url.clone();
             crate::service::cli::runtime()?.block_on(async move {
@@ -71,6 +90,8 @@ pub fn run(a: MachineArgs) -> Result<()> {
                             gearbox_id: (s.gearbox != BUILTIN_ID).then(|| s.gearbox.clone()),
                             input_shaft_hz: s.input_shaft_hz,
                             channels: s.channels.clone(),
+                            tacho_channel: s.tacho_channel.clone(),
+                            tacho_ppr: s.tacho_ppr,
                         },
                         now_ms(),
                     )
@@ -79,7 +100,8 @@ pub fn run(a: MachineArgs) -> Result<()> {
                 println!(
                     "{}",
                     serde_json::json!({"id": s.id, "gearbox": s.gearbox, "input_shaft_hz": s.input_shaft_hz,
-                                       "channels": s.channels, "created": created})
+                                       "channels": s.channels, "tacho_channel": s.tacho_channel,
+                                       "tacho_ppr": s.tacho_ppr, "created": created})
                 );
                 Ok(())
             })

@@ -1,9 +1,11 @@
 //! A machine's configuration and its baseline.
 //!
 //! * `PUT /v1/machines/{id}` (admin): `{"gearbox": "<id>", "input_shaft_hz"?: number,
-//!   "channels"?: [names]}` — which gearbox the machine's records are diagnosed with (default
-//!   the built-in paper rig), its nominal input-shaft rate (a hint for finding the mesh line;
-//!   the rate itself is measured in each record) and the channels to diagnose.
+//!   "channels"?: [names], "tacho_channel"?: name, "tacho_ppr"?: integer}` — which gearbox
+//!   the machine's records are diagnosed with (default the built-in paper rig), its nominal
+//!   input-shaft rate (a hint for finding the mesh line; the rate itself is measured in each
+//!   record), the channels to diagnose, and the channel of its tachometer with its pulses per
+//!   input-shaft revolution (the record's speed is then counted from the pulses).
 //! * `GET/POST/DELETE /v1/machines/{id}/baseline`: the records marked healthy. A record is
 //!   marked when posted (`…/records?baseline=true`) or afterwards (POST `{"record_ids": […]}`,
 //!   admin); DELETE clears the baseline, `DELETE …/baseline/{record_id}` unmarks one.
@@ -90,6 +92,15 @@ impl MachineContext {
 /// The machine (if it exists), its gearbox and that gearbox's diagnoser.
 pub async fn context(app: &AppState, machine_id: &str) -> ApiResult<MachineContext> {
     let machine = app.store.get_machine(machine_id).await?;
+    context_of(app, machine_id, machine).await
+}
+
+/// [`context`] of a machine row already read (`None`: a machine without a row yet).
+pub async fn context_of(
+    app: &AppState,
+    machine_id: &str,
+    machine: Option<MachineRow>,
+) -> ApiResult<MachineContext> {
     let gid = machine
         .as_ref()
         .and_then(|m| m.gearbox_id.clone())
@@ -209,6 +220,45 @@ pub struct MachineBody {
     pub input_shaft_hz: Option<f64>,
     #[serde(default)]
     pub channels: Option<Vec<String>>,
+    #[serde(default)]
+    pub tacho_channel: Option<String>,
+    /// A number so that `10.0` is read as 10 (JSON Schema's integers); checked to be whole.
+    #[serde(default)]
+    pub tacho_ppr: Option<f64>,
+}
+
+/// The default name of a record's tachometer channel, for a machine that names none.
+pub const DEFAULT_TACHO_CHANNEL: &str = "tacho";
+/// Most tachometer pulses per revolution accepted (a fine shaft encoder).
+pub const MAX_TACHO_PPR: i64 = 10_000;
+
+/// Check a machine's tachometer settings: `tacho_channel` a channel name (1 to 64
+/// characters) that is not among the `channels` to diagnose, `tacho_ppr` from 1 to
+/// [`MAX_TACHO_PPR`]. `Err` is a message for the caller.
+pub fn check_tacho(
+    tacho_channel: Option<&str>,
+    tacho_ppr: i64,
+    channels: Option<&[String]>,
+) -> Result<(), String> {
+    if !(1..=MAX_TACHO_PPR).contains(&tacho_ppr) {
+        return Err(format!(
+            "`tacho_ppr` is the tachometer's pulses per input-shaft revolution, a whole number \
+             from 1 to {MAX_TACHO_PPR}, got {tacho_ppr}"
+        ));
+    }
+    let Some(t) = tacho_channel else {
+        return Ok(());
+    };
+    if t.is_empty() || t.len() > 64 {
+        return Err("`tacho_channel` is a channel name of 1 to 64 characters".into());
+    }
+    if channels.is_some_and(|c| c.iter().any(|c| c == t)) {
+        return Err(format!(
+            "`tacho_channel` `{t}` is also in `channels`: the tachometer's channel gives the \
+             speed and is not diagnosed; list only the vibration channels in `channels`"
+        ));
+    }
+    Ok(())
 }
 
 /// The configuration part of a machine's JSON.
@@ -217,6 +267,8 @@ pub fn config_json(m: &MachineRow) -> Value {
         "gearbox": m.gearbox_id.clone().unwrap_or_else(|| BUILTIN_ID.to_string()),
         "input_shaft_hz": m.input_shaft_hz,
         "channels": m.channels,
+        "tacho_channel": m.tacho_channel,
+        "tacho_ppr": m.tacho_ppr,
     })
 }
 
@@ -240,7 +292,7 @@ pub async fn put(
             "Invalid machine configuration",
             format!(
                 "{e}; expected {{\"gearbox\": \"<gearbox id>\", \"input_shaft_hz\"?: number, \
-                 \"channels\"?: [names]}}"
+                 \"channels\"?: [names], \"tacho_channel\"?: name, \"tacho_ppr\"?: integer}}"
             ),
         )
     })?;
@@ -282,6 +334,20 @@ pub async fn put(
             ));
         }
     }
+    let tacho_ppr = match b.tacho_ppr {
+        None => 1,
+        Some(p) if p.is_finite() && p.fract() == 0.0 && p.abs() <= 1e15 => p as i64,
+        Some(p) => {
+            return Err(ApiError::unprocessable(
+                "invalid-machine",
+                "Invalid machine configuration",
+                format!("`tacho_ppr` must be a whole number of pulses per revolution, got {p}"),
+            ));
+        }
+    };
+    check_tacho(b.tacho_channel.as_deref(), tacho_ppr, b.channels.as_deref()).map_err(|e| {
+        ApiError::unprocessable("invalid-machine", "Invalid machine configuration", e)
+    })?;
     let created = app
         .store
         .put_machine(
@@ -290,6 +356,8 @@ pub async fn put(
                 gearbox_id: (gearbox != BUILTIN_ID).then_some(gearbox),
                 input_shaft_hz: b.input_shaft_hz,
                 channels: b.channels,
+                tacho_channel: b.tacho_channel,
+                tacho_ppr,
             },
             now_ms(),
         )

@@ -90,6 +90,12 @@ pub async fn get_machine(
         s["alert"] = full.get("alert").cloned().unwrap_or(Value::Null);
         s["channels"] = full.get("channels").cloned().unwrap_or(Value::Null);
         s["indicators"] = full.get("indicators").cloned().unwrap_or(Value::Null);
+        // The record's measured speed and load, why the wear figure is missing (when it is)
+        // and what the departure from the baseline points at, for people.
+        s["operating_state"] = full.get("operating_state").cloned().unwrap_or(Value::Null);
+        s["state_note"] = full.get("state_note").cloned().unwrap_or(Value::Null);
+        s["wear_note"] = full.get("wear_note").cloned().unwrap_or(Value::Null);
+        s["findings"] = full.get("findings").cloned().unwrap_or(json!([]));
         s
     });
     let mut body = machine_summary(&m);

@@ -1,6 +1,10 @@
 //! `POST /v1/machines/{machine_id}/records`: decode, assess (off the async runtime, with the
 //! core's [`crate::assessment::assess`]), store in one transaction, answer 201 with the
 //! assessment. `Idempotency-Key` makes retries safe.
+//!
+//! The record's operating state: its load from `?load=` or the JSON body's `load`; its speed
+//! counted from its tachometer channel — the machine's `tacho_channel`, else a channel named
+//! `tacho` — which is not diagnosed itself ([`tacho_of`]).
 
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
@@ -16,16 +20,19 @@ use super::AppState;
 use super::auth::Caller;
 use super::error::{ApiError, ApiResult, problem_from_error};
 use super::http::{body_format, check_machine_id, content_decoded, read_body};
-use super::machines::MachineContext;
+use super::machines::{DEFAULT_TACHO_CHANNEL, MachineContext};
 use super::metrics::StageClock;
 use super::spectrum::{PlotSpectrum, plot_from_spectrum, plot_spectrum};
 use super::wire::{BodyFormat, Decoded, decode, parse_query};
 use crate::assessment::{
-    Assessment, Machine, MachineCalibration, RecordFacts, TableDiagnoser, Thresholds, assess,
+    Assessment, Machine, MachineCalibration, RecordFacts, TableDiagnoser, TachoChannel, Thresholds,
+    assess,
 };
 use crate::gearbox::Gearbox;
 use crate::keys::Scope;
-use crate::store::{DiagnosisRow, IdemRow, Ingest, NewRecord, StoreError, new_id, now_ms};
+use crate::store::{
+    DiagnosisRow, IdemRow, Ingest, MachineRow, NewRecord, StoreError, new_id, now_ms,
+};
 
 /// The handler.
 pub async fn post_record(
@@ -81,12 +88,21 @@ async fn ingest(
     if let Some(r) = idem.replay_stored(app).await? {
         return Ok(r);
     }
+    let machine = app.store.get_machine(machine_id).await?;
     clock.skip();
-    let dec = decode(format, &q, &bytes, limits)?;
+    let pulses = tacho_name(machine.as_ref());
+    let dec = decode(format, &q, &bytes, limits, Some(pulses))?;
     let declared_healthy = q.baseline()?;
+    let tacho = tacho_of(machine.as_ref(), &dec, q.tacho_ppr()?)?;
     clock.lap("decode");
 
-    let job = AssessJob::load(app, machine_id, dec, q.channel.as_deref(), declared_healthy).await?;
+    let job = RecordRequest {
+        channel: q.channel,
+        declared_healthy,
+        tacho,
+    }
+    .load(app, machine_id, machine, dec)
+    .await?;
     let (dec, assessment, spectrum, job_clock) = tokio::task::spawn_blocking(move || job.run())
         .await
         .map_err(|e| ApiError::internal(format!("the diagnosis task failed: {e}")))?
@@ -115,6 +131,7 @@ async fn ingest(
         ),
         diagnosis: diagnosis_row(&assessment, &body, spectrum.as_ref(), &ids, machine_id),
         idempotency: idem.row(&response_text),
+        event_extras: event_extras(&body),
     };
     clock.lap("assemble");
     if let Some(r) = store(app, ing, &idem).await? {
@@ -123,7 +140,7 @@ async fn ingest(
     app.metrics.records_accepted.fetch_add(1, Ordering::Relaxed);
     app.metrics.stages(&clock);
     app.webhook_wake.notify_one();
-    let ea = assessment.wear().map_or(0.0, |w| w.estimate);
+    let ea = assessment.wear().map(|w| w.estimate);
     tracing::info!(machine = machine_id, diagnosis = %ids.diagnosis_id, ea, alert_level = assessment.level(), "record accepted");
     Ok(created(response_text, &ids.diagnosis_id))
 }
@@ -159,6 +176,70 @@ fn created(response_text: String, diagnosis_id: &str) -> Response {
         h.insert(header::LOCATION, v);
     }
     r
+}
+
+/// The name of the channel that is the machine's tachometer when a record has it: the
+/// machine's `tacho_channel`, else [`DEFAULT_TACHO_CHANNEL`].
+fn tacho_name(machine: Option<&MachineRow>) -> &str {
+    machine
+        .and_then(|m| m.tacho_channel.as_deref())
+        .unwrap_or(DEFAULT_TACHO_CHANNEL)
+}
+
+/// The record's tachometer: the machine's `tacho_channel` (the record must have it), else a
+/// channel named [`DEFAULT_TACHO_CHANNEL`] if the record has one; pulses per revolution from
+/// `?tacho_ppr=`, else the machine's `tacho_ppr`.
+fn tacho_of(
+    machine: Option<&MachineRow>,
+    dec: &Decoded,
+    ppr: Option<usize>,
+) -> ApiResult<Option<TachoChannel>> {
+    let name = tacho_name(machine);
+    let configured = machine.is_some_and(|m| m.tacho_channel.is_some());
+    let has = dec.channels.iter().any(|(n, _)| n == name);
+    if configured && !has {
+        let names: Vec<String> = dec.channels.iter().map(|(n, _)| format!("`{n}`")).collect();
+        return Err(ApiError::unprocessable(
+            "missing-tacho-channel",
+            "Tachometer channel missing",
+            format!(
+                "the machine's tachometer channel `{name}` is not in the record (its channels: \
+                 {}); send the tachometer's samples as channel `{name}`, or change the \
+                 machine's `tacho_channel` (PUT /v1/machines/{{machine_id}})",
+                names.join(", ")
+            ),
+        )
+        .with("tacho_channel", name));
+    }
+    if !has {
+        if ppr.is_some() {
+            return Err(ApiError::unprocessable(
+                "missing-tacho-channel",
+                "Tachometer channel missing",
+                format!(
+                    "`tacho_ppr` was given but the record has no tachometer channel (a channel \
+                     named `{name}`, or the machine's `tacho_channel`)"
+                ),
+            )
+            .with("tacho_channel", name));
+        }
+        return Ok(None);
+    }
+    let machine_ppr = machine.map_or(1, |m| m.tacho_ppr.max(1) as usize);
+    Ok(Some(TachoChannel {
+        name: name.to_string(),
+        pulses_per_rev: ppr.unwrap_or(machine_ppr),
+    }))
+}
+
+/// What each webhook payload of the record carries besides the diagnosis row's members: the
+/// deciding channel's `findings` (strongest first) and the record's `operating_state`, as
+/// answered.
+fn event_extras(body: &Value) -> serde_json::Map<String, Value> {
+    ["findings", "operating_state"]
+        .into_iter()
+        .map(|k| (k.to_string(), body.get(k).cloned().unwrap_or(Value::Null)))
+        .collect()
 }
 
 /// The ids and time the service gives an accepted record.
@@ -270,9 +351,10 @@ fn diagnosis_row(
     machine_id: &str,
 ) -> DiagnosisRow {
     let decide = a.deciding_channel();
-    let (ea, lower, upper) = a
-        .wear()
-        .map_or((0.0, 0.0, 0.0), |w| (w.estimate, w.lower, w.upper));
+    // No wear figure (no table, or the model does not fit the record): `has_wear` is false
+    // and the zeros below are never shown (the API answers null, trends leave a gap).
+    let wear = a.wear();
+    let (ea, lower, upper) = wear.map_or((0.0, 0.0, 0.0), |w| (w.estimate, w.lower, w.upper));
     let motion = match &decide.reading {
         Some(r) => r.diagnosis.motion_state.clone(),
         None => "unknown".to_string(),
@@ -290,7 +372,7 @@ fn diagnosis_row(
         motion_state: motion,
         body: body.to_string(),
         spectrum: serde_json::to_string(&spectrum).unwrap_or_else(|_| "null".into()),
-        has_wear: decide.reading.is_some(),
+        has_wear: wear.is_some(),
         novelty_score: decide.novelty.as_ref().map(|n| n.score),
         novelty_threshold: decide.novelty.as_ref().map(|n| n.threshold),
         channel: Some(decide.name.clone()),
@@ -401,6 +483,15 @@ fn replay(app: &AppState, prev: &IdemRow, request_hash: &str) -> ApiResult<Respo
     Ok(r)
 }
 
+/// What the request says about the record besides its samples.
+struct RecordRequest {
+    /// `?channel=`.
+    channel: Option<String>,
+    /// Posted with `?baseline=true`.
+    declared_healthy: bool,
+    tacho: Option<TachoChannel>,
+}
+
 /// Everything the blocking part of an ingest needs: the decoded record, the chosen channels
 /// and the machine's context (gearbox, table, baseline, calibration).
 struct AssessJob {
@@ -412,24 +503,30 @@ struct AssessJob {
     thresholds: Thresholds,
     /// Posted with `?baseline=true`.
     declared_healthy: bool,
+    tacho: Option<TachoChannel>,
 }
 
 type JobResult = (Decoded, Assessment, Option<PlotSpectrum>, StageClock);
 
-impl AssessJob {
+impl RecordRequest {
     /// The machine's gearbox (and its table, when ready), baseline and calibration, and the
-    /// channels to assess.
+    /// channels to assess (never the tachometer's).
     async fn load(
+        self,
         app: &AppState,
         machine_id: &str,
+        machine: Option<MachineRow>,
         dec: Decoded,
-        channel: Option<&str>,
-        declared_healthy: bool,
     ) -> ApiResult<AssessJob> {
-        let ctx = super::machines::context(app, machine_id).await?;
+        let ctx = super::machines::context_of(app, machine_id, machine).await?;
+        let tacho_index = self
+            .tacho
+            .as_ref()
+            .and_then(|t| dec.channels.iter().position(|(n, _)| *n == t.name));
         let chosen = dec.select(
-            channel,
+            self.channel.as_deref(),
             ctx.machine.as_ref().and_then(|m| m.channels.as_deref()),
+            tacho_index,
         )?;
         let baselines = super::machines::baselines(app, machine_id, &ctx.gearbox_row.hash).await?;
         let calibration = app
@@ -444,10 +541,13 @@ impl AssessJob {
             calibration,
             baselines,
             thresholds: app.settings.thresholds,
-            declared_healthy,
+            declared_healthy: self.declared_healthy,
+            tacho: self.tacho,
         })
     }
+}
 
+impl AssessJob {
     /// The assessment (timed by stage) and the spectrum plot of the deciding channel.
     fn run(mut self) -> crate::Result<JobResult> {
         let mut clock = StageClock::new();
@@ -456,8 +556,8 @@ impl AssessJob {
             shaft_hz: self.dec.shaft_hz,
             sensor: self.dec.sensor.clone(),
             declared_healthy: self.declared_healthy,
-            load: None,
-            tacho: None,
+            load: self.dec.load.clone(),
+            tacho: self.tacho.clone(),
         };
         let ctx = &self.ctx;
         let diagnoser: Option<&TableDiagnoser> = ctx.diagnoser.as_deref();

@@ -609,8 +609,11 @@ async fn dashboard_shows_the_fleet_by_severity_and_a_machine_from_the_url() {
             .await;
         assert!(label.as_str().unwrap().starts_with("local time"), "{label}");
     }
+    // A mark per diagnosis, in time order: a wear point where it has a wear figure, a hollow
+    // mark on the axis where it has none (the model does not fit these records: never a
+    // point at 0).
     let xs = d
-        .script("return [...document.querySelectorAll('#trend .trend-point')].map(c => +c.getAttribute('cx'))")
+        .script("return [...document.querySelectorAll('#trend .trend-point, #trend .trend-nowear')].map(c => +c.getAttribute('cx'))")
         .await;
     let xs: Vec<f64> = xs
         .as_array()
@@ -618,8 +621,18 @@ async fn dashboard_shows_the_fleet_by_severity_and_a_machine_from_the_url() {
         .iter()
         .map(|v| v.as_f64().unwrap())
         .collect();
-    assert_eq!(xs.len(), 5, "a wear point per diagnosis: {xs:?}");
+    assert_eq!(xs.len(), 5, "a wear mark per diagnosis: {xs:?}");
     assert!(xs.windows(2).all(|w| w[0] <= w[1]), "{xs:?}");
+    let with_wear = api_m["trend"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|p| p["estimate"].is_number())
+        .count();
+    let points = d
+        .script("return document.querySelectorAll('#trend .trend-point').length")
+        .await;
+    assert_eq!(points, json!(with_wear), "{api_m}");
     // The novelty series: a point per scored diagnosis, the threshold drawn, the broken record
     // above it.
     let scored = api_m["trend"]
@@ -805,6 +818,56 @@ async fn dashboard_shows_the_fleet_by_severity_and_a_machine_from_the_url() {
         drawn["failed"].as_str().unwrap().contains("no mesh"),
         "{drawn}"
     );
+
+    // A real machine's latest diagnosis (issue 31): its measured speed and load, its findings
+    // in words, and no wear number when the model does not fit.
+    let real = d
+        .script(
+            "const m = {id: 'real', record_count: 3, gearbox: {status: 'ready'}, latest: {\
+               created_at: '2026-11-23T08:00:00Z', wear_degree: null, motion_state: 'period-1', warnings: [], \
+               wear_note: 'no wear figure: the model does not fit this record', \
+               operating_state: {shaft_hz: 35.0012, source: 'tachometer', speed_variation: 0.002, load: 'low'}, \
+               findings: [{kind: 'gear-local-damage', shaft: 'idler', strength: 12.5, \
+                           summary: 'gear 24T (stage 2 pinion) on shaft `idler`: the envelope repeats at `idler`\\'s rate +42.6 dB', \
+                           evidence: [{feature: 'env.idler', change: '+42.6 dB', z: 12.5, why: 'impulses once per revolution'}]}, \
+                          {kind: 'shaft', shaft: 'idler', strength: 4.3, summary: 'shaft `idler` (bent shaft or misalignment): its 1× line up +9.9 dB', evidence: []}]}}; \
+             renderLatest(m); renderFindings(m.latest); \
+             const out = {wear: document.getElementById('wear-estimate').textContent, \
+                          speed: document.getElementById('speed').textContent, \
+                          load: document.getElementById('load').textContent, \
+                          shown: !document.getElementById('findings-box').hidden, \
+                          findings: [...document.querySelectorAll('#findings li')].map(li => li.textContent), \
+                          code: [...document.querySelectorAll('#findings li:first-child code')].map(c => c.textContent), \
+                          why: document.querySelector('#findings li').title}; \
+             m.latest.findings = []; m.latest.operating_state = null; m.latest.state_note = 'no hint'; \
+             renderLatest(m); renderFindings(m.latest); \
+             out.unmeasured = document.getElementById('speed').textContent; \
+             out.none = document.getElementById('findings-box').hidden; \
+             return out",
+        )
+        .await;
+    assert_eq!(
+        real["wear"], "no wear figure (poor fit: the model does not fit this record)",
+        "{real}"
+    );
+    assert_eq!(real["speed"], "35.00 Hz input shaft (tachometer)", "{real}");
+    assert_eq!(real["load"], "low", "{real}");
+    assert_eq!(real["shown"], true, "{real}");
+    let shown = real["findings"].as_array().unwrap();
+    assert_eq!(shown.len(), 2, "{real}");
+    assert!(
+        shown[0].as_str().unwrap().starts_with(
+            "gear 24T (stage 2 pinion) on shaft idler: the envelope repeats at idler's rate"
+        ),
+        "{real}"
+    );
+    assert_eq!(real["code"], json!(["idler", "idler"]), "{real}");
+    assert!(
+        real["why"].as_str().unwrap().contains("env.idler +42.6 dB"),
+        "{real}"
+    );
+    assert_eq!(real["unmeasured"], "not measured: no hint", "{real}");
+    assert_eq!(real["none"], true, "{real}");
 
     d.cmd(reqwest::Method::DELETE, "", None).await;
     let _ = std::fs::remove_dir_all(&profile);

@@ -12,6 +12,7 @@ mod cli;
 mod faults;
 mod gearboxes;
 mod openapi;
+mod operating_state;
 mod security;
 mod store;
 mod webhooks;

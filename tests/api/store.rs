@@ -18,6 +18,7 @@ both_stores!(
     a_table_job_is_claimed_once_and_taken_over_after_its_lease,
     a_gearbox_put_again_is_unchanged_and_a_new_description_requeues,
     baseline_marks_touch_only_the_machine_s_records,
+    a_database_from_before_the_tachometer_keeps_working,
 );
 
 fn gearbox(id: &str, hash: &str) -> GearboxRow {
@@ -197,12 +198,18 @@ async fn baseline_marks_touch_only_the_machine_s_records(b: Backend) {
         gearbox_id: Some("gb".into()),
         input_shaft_hz: Some(29.5),
         channels: Some(vec!["a1".into(), "a2".into()]),
+        tacho_channel: Some("speed".into()),
+        tacho_ppr: 60,
     };
     assert!(st.put_machine(&cfg, 5).await.unwrap());
     assert!(!st.put_machine(&cfg, 6).await.unwrap());
     let m = st.get_machine("m3").await.unwrap().unwrap();
     assert_eq!(m.gearbox_id.as_deref(), Some("gb"));
     assert_eq!(m.channels, Some(vec!["a1".to_string(), "a2".to_string()]));
+    assert_eq!(
+        (m.tacho_channel.as_deref(), m.tacho_ppr),
+        (Some("speed"), 60)
+    );
     assert_eq!((m.record_count, m.alert_level.as_str()), (0, "unknown"));
     st.close().await;
 }
@@ -271,6 +278,7 @@ fn ingest(machine: &str, idem: Option<&str>, t: i64) -> Ingest {
             status: 201,
             response: "{}".into(),
         }),
+        event_extras: Default::default(),
     }
 }
 
@@ -357,5 +365,63 @@ async fn concurrent_records_share_commits_and_are_each_stored_once(b: Backend) {
         let stored = st.get_idempotent("key", &k).await.unwrap();
         assert!(stored.is_some(), "{k} missing");
     }
+    st.close().await;
+}
+
+/// A database migrated before 0004 (issue 31) opens with the new columns' defaults, and its
+/// diagnoses stored with a withheld wear figure (`ea_*` written as exactly 0, `has_wear` 1)
+/// stop reading as a wear of 0; a real wear figure is left as it was.
+async fn a_database_from_before_the_tachometer_keeps_working(b: Backend) {
+    let Some(db) = TestDb::new(b).await else {
+        return;
+    };
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(match b {
+        Backend::Sqlite => "migrations/sqlite",
+        Backend::Postgres => "migrations/postgres",
+    });
+    let before = sqlx::migrate::Migrator::new(dir).await.unwrap();
+    let rows = [
+        "INSERT INTO machines (id, created_at, updated_at, gearbox_id, input_shaft_hz) \
+         VALUES ('old', 1, 1, NULL, 40.0)",
+        "INSERT INTO records (id, machine_id, received_at, content_type, sample_rate_hz, \
+         sample_count, sha256, features) VALUES ('r1', 'old', 1, 'text/csv', 20000, 1, '00', '{}')",
+        "INSERT INTO diagnoses (id, record_id, machine_id, created_at, ea_estimate, ea_lower, \
+         ea_upper, alert_level, motion_state, body, spectrum, has_wear) \
+         VALUES ('withheld', 'r1', 'old', 1, 0, 0, 0, 'ok', 'period-1', '{}', 'null', 1)",
+        "INSERT INTO diagnoses (id, record_id, machine_id, created_at, ea_estimate, ea_lower, \
+         ea_upper, alert_level, motion_state, body, spectrum, has_wear) \
+         VALUES ('worn', 'r1', 'old', 2, 0.5, 0.4, 0.6, 'ok', 'period-1', '{}', 'null', 1)",
+    ];
+    match b {
+        Backend::Sqlite => {
+            let opts =
+                <sqlx::sqlite::SqliteConnectOptions as std::str::FromStr>::from_str("sqlite://")
+                    .unwrap()
+                    .filename(&db.url)
+                    .create_if_missing(true);
+            let pool = sqlx::SqlitePool::connect_with(opts).await.unwrap();
+            before.run_to(3, &pool).await.unwrap();
+            for q in rows {
+                sqlx::query(q).execute(&pool).await.unwrap();
+            }
+            pool.close().await;
+        }
+        Backend::Postgres => {
+            let pool = sqlx::PgPool::connect(&db.url).await.unwrap();
+            before.run_to(3, &pool).await.unwrap();
+            for q in rows {
+                sqlx::query(q).execute(&pool).await.unwrap();
+            }
+            pool.close().await;
+        }
+    }
+    let st = store::connect(&db.url).await.unwrap();
+    let m = st.get_machine("old").await.unwrap().unwrap();
+    assert_eq!((m.tacho_channel, m.tacho_ppr), (None, 1));
+    assert_eq!(m.input_shaft_hz, Some(40.0));
+    let ds = st.list_diagnoses("old", 0, i64::MIN, 10).await.unwrap();
+    let wear: Vec<(&str, bool)> = ds.iter().map(|d| (d.id.as_str(), d.has_wear)).collect();
+    assert_eq!(wear, [("withheld", false), ("worn", true)]);
+    assert!(store::wear_json(&ds[0]).is_null());
     st.close().await;
 }

@@ -47,14 +47,19 @@ pub struct Ingest {
     pub record: NewRecord,
     pub diagnosis: DiagnosisRow,
     pub idempotency: Option<IdemRow>,
+    /// Members added to each webhook payload of this record besides the diagnosis row's (the
+    /// service's: the deciding channel's `findings` and the record's `operating_state`); a
+    /// member of the same name as a row's is not replaced.
+    pub event_extras: serde_json::Map<String, serde_json::Value>,
 }
 
 /// The webhook events an ingest raises, given the machine's previous alert level:
 /// `diagnosis.created` always, `wear.threshold_crossed` when the level rises to warning or
-/// alarm. Payloads are JSON texts.
+/// alarm. Payloads are JSON texts: the diagnosis row's members and the ingest's
+/// [`event_extras`](Ingest::event_extras).
 pub fn ingest_events(prev_level: &str, ing: &Ingest, event_id: &str) -> Vec<(String, String)> {
     let d = &ing.diagnosis;
-    let base = serde_json::json!({
+    let mut base = serde_json::json!({
         "event_id": event_id,
         "machine_id": d.machine_id,
         "diagnosis_id": d.id,
@@ -66,6 +71,11 @@ pub fn ingest_events(prev_level: &str, ing: &Ingest, event_id: &str) -> Vec<(Str
         "novelty": novelty_json(d),
         "channel": d.channel,
     });
+    if let serde_json::Value::Object(m) = &mut base {
+        for (k, v) in &ing.event_extras {
+            m.entry(k.clone()).or_insert_with(|| v.clone());
+        }
+    }
     let mut out = Vec::new();
     let mut created = base.clone();
     created["event"] = "diagnosis.created".into();

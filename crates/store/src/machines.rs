@@ -19,6 +19,10 @@ pub struct MachineRow {
     pub input_shaft_hz: Option<f64>,
     /// The channel names it records; `None`: whatever a record brings.
     pub channels: Option<Vec<String>>,
+    /// The record channel of its tachometer; `None`: a channel named `tacho`, if any.
+    pub tacho_channel: Option<String>,
+    /// Tachometer pulses per input-shaft revolution (at least 1).
+    pub tacho_ppr: i64,
 }
 
 /// What `PUT /v1/machines/{id}` sets.
@@ -28,6 +32,9 @@ pub struct MachineConfig {
     pub gearbox_id: Option<String>,
     pub input_shaft_hz: Option<f64>,
     pub channels: Option<Vec<String>>,
+    pub tacho_channel: Option<String>,
+    /// Pulses per input-shaft revolution (at least 1).
+    pub tacho_ppr: i64,
 }
 
 /// Machines.
@@ -61,6 +68,8 @@ macro_rules! machines_sql {
                 channels: r
                     .try_get::<Option<String>, _>("channels")?
                     .and_then(|c| serde_json::from_str(&c).ok()),
+                tacho_channel: r.try_get("tacho_channel")?,
+                tacho_ppr: r.try_get("tacho_ppr")?,
             })
         }
 
@@ -89,27 +98,32 @@ macro_rules! machines_sql {
                 let mut tx = self.pool.begin().await?;
                 let ins = sqlx::query(
                     "INSERT INTO machines (id, created_at, updated_at, gearbox_id, \
-                     input_shaft_hz, channels) VALUES ($1, $2, $2, $3, $4, $5) \
-                     ON CONFLICT (id) DO NOTHING",
+                     input_shaft_hz, channels, tacho_channel, tacho_ppr) \
+                     VALUES ($1, $2, $2, $3, $4, $5, $6, $7) ON CONFLICT (id) DO NOTHING",
                 )
                 .bind(&m.id)
                 .bind(now)
                 .bind(&m.gearbox_id)
                 .bind(m.input_shaft_hz)
                 .bind(&channels)
+                .bind(&m.tacho_channel)
+                .bind(m.tacho_ppr)
                 .execute(&mut *tx)
                 .await?;
                 let created = ins.rows_affected() == 1;
                 if !created {
                     sqlx::query(
                         "UPDATE machines SET gearbox_id = $2, input_shaft_hz = $3, \
-                         channels = $4, updated_at = $5 WHERE id = $1",
+                         channels = $4, updated_at = $5, tacho_channel = $6, tacho_ppr = $7 \
+                         WHERE id = $1",
                     )
                     .bind(&m.id)
                     .bind(&m.gearbox_id)
                     .bind(m.input_shaft_hz)
                     .bind(&channels)
                     .bind(now)
+                    .bind(&m.tacho_channel)
+                    .bind(m.tacho_ppr)
                     .execute(&mut *tx)
                     .await?;
                 }

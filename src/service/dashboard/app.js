@@ -254,9 +254,10 @@ function renderTrend(m, dom) {
       const c = el("circle", { cx: sx(p.t), cy: sy(p.estimate), r: 3.5, fill: "#1d4ed8", class: "trend-point", "data-t": p.created_at }, svg);
       tooltip(c, when(p.created_at) + ": ea " + p.estimate.toFixed(3) + (num(p.lower) ? " (" + p.lower.toFixed(2) + " … " + p.upper.toFixed(2) + ")" : "") + ", " + p.alert_level);
     } else {
-      // A diagnosis without a wear degree: a hollow mark on the axis, no line through it.
+      // A diagnosis without a wear figure: a hollow mark on the axis, no line through it (never
+      // a point at 0).
       const c = el("circle", { cx: sx(p.t), cy: H - pad.b, r: 3.5, fill: "#fff", stroke: "#8a8f98", class: "trend-nowear", "data-t": p.created_at }, svg);
-      tooltip(c, when(p.created_at) + ": no wear degree (the model does not fit, or the gearbox's table is not ready), " + p.alert_level);
+      tooltip(c, when(p.created_at) + ": no wear figure (the model does not fit the record, or the gearbox's table is not ready), " + p.alert_level);
     }
   }
   for (const [name, v, c] of [["warning", th.warning, "var(--warning)"], ["alarm", th.alarm, "var(--alarm)"]]) {
@@ -265,7 +266,7 @@ function renderTrend(m, dom) {
     el("text", { x: W - pad.r - 2, y: sy(v) - 3, "text-anchor": "end", fill: c }, svg, name + " " + v);
   }
   if (!pts.length) note(svg, W, H, "no diagnosis yet");
-  else if (!pts.some((p) => num(p.estimate))) note(svg, W, H, "no wear degree yet: the model does not fit these records, or the table is not ready");
+  else if (!pts.some((p) => num(p.estimate))) note(svg, W, H, "no wear figure: the model does not fit these records, or the table is not ready");
 }
 
 function renderNovelty(m, dom) {
@@ -404,7 +405,7 @@ function renderChannels(l) {
     const n = c.novelty;
     h("td", {}, tr, n && num(n.score) ? n.score.toFixed(2) + " / " + fmt(n.threshold, 2) : "no baseline");
     const w = c.wear_degree;
-    h("td", {}, tr, w && num(w.estimate) ? w.estimate.toFixed(3) + (c.fit && c.fit.inflated ? " (poor fit)" : "") : "–");
+    h("td", {}, tr, w && num(w.estimate) ? w.estimate.toFixed(3) : c.fit && c.fit.inflated ? "no figure (poor fit)" : "–");
     const top = n && Array.isArray(n.top_features) ? n.top_features.slice(0, 3).map((f) => f.name + " z " + fmt(f.z, 1)).join(", ") : "";
     h("td", { class: "muted" }, tr, top || (c.alert && c.alert.reason) || "");
   }
@@ -444,6 +445,68 @@ function renderBaseline(m) {
   $("baseline-channels").textContent = chs.length > 1 || (chs.length && !b.ready)
     ? chs.map(([n, c]) => n + ": " + c.records + (c.ready ? " (threshold " + fmt(c.threshold, 2) + ")" : " (not ready)")).join(" · ")
     : chs.length ? "threshold " + fmt(chs[0][1].threshold, 2) : "";
+  // The operating states the (first) state-aware channel's baseline covers, per load.
+  const aware = chs.find(([, c]) => c.state_aware && c.coverage);
+  $("baseline-coverage").textContent = aware ? "covers " + coverageText(aware[1].coverage) : "";
+}
+
+/** `low: 30.0–40.0 Hz (6) · high: …` — the speeds a state-aware baseline holds per load. */
+function coverageText(cov) {
+  return (cov.loads || []).map((l) => {
+    const where = num(l.min_hz) && num(l.max_hz)
+      ? (Math.abs(l.max_hz - l.min_hz) < 0.05 ? l.min_hz.toFixed(1) : l.min_hz.toFixed(1) + "–" + l.max_hz.toFixed(1)) + " Hz"
+      : "";
+    return (l.load === null || l.load === undefined ? "any load" : "load " + l.load) + ": " + where + " (" + l.records + ")";
+  }).join(" · ");
+}
+
+/** The wear figure of the latest diagnosis, or why there is none (never a number then). */
+function wearText(l, m) {
+  if (!l) return "–";
+  const w = l.wear_degree;
+  if (w && num(w.estimate)) return w.estimate.toFixed(3);
+  if (l.wear_note) return "no wear figure (poor fit: the model does not fit this record)";
+  const g = m.gearbox || {};
+  if (g.status && g.status !== "ready") return "no wear figure (the gearbox's table is not ready)";
+  return "no wear figure";
+}
+
+/** The measured speed: `35.00 Hz (tachometer)`, or why it was not measured. */
+function speedText(l) {
+  const st = l && l.operating_state;
+  if (st && num(st.shaft_hz)) {
+    const varies = num(st.speed_variation) && st.speed_variation > 0.02 ? ", varies " + (100 * st.speed_variation).toFixed(0) + " %" : "";
+    return st.shaft_hz.toFixed(2) + " Hz input shaft (" + (st.source || "measured") + varies + ")";
+  }
+  return l && l.state_note ? "not measured: " + l.state_note : "–";
+}
+
+/** `text` into `node`, its `name` spans (the core's sentences quote part names so) as code. */
+function codeText(node, text) {
+  text.split("`").forEach((part, i) => {
+    if (i % 2) h("code", {}, node, part);
+    else node.appendChild(document.createTextNode(part));
+  });
+}
+
+/** The latest diagnosis's findings, each in words, strongest first. */
+function renderFindings(l) {
+  const box = $("findings-box");
+  const ol = $("findings");
+  ol.innerHTML = "";
+  const fs = (l && Array.isArray(l.findings)) ? l.findings : [];
+  box.hidden = !l || (!fs.length && !l.operating_state);
+  $("findings-note").textContent = fs.length
+    ? "what the departure from the baseline at this speed and load points at, strongest first"
+    : "none: the latest record does not depart from its baseline at this speed and load (or the machine has no baseline with states yet)";
+  for (const f of fs) {
+    const li = h("li", { class: "finding" }, ol);
+    codeText(li, f.summary || f.kind || "");
+    li.dataset.kind = f.kind || "";
+    h("span", { class: "kind" }, li, (f.kind || "") + (num(f.strength) ? ", strength " + f.strength.toFixed(1) : ""));
+    const ev = Array.isArray(f.evidence) ? f.evidence : [];
+    if (ev.length) li.title = ev.map((e) => e.feature + " " + e.change + " (z " + fmt(e.z, 1) + "): " + e.why).join("\n");
+  }
 }
 
 function renderLatest(m) {
@@ -451,14 +514,14 @@ function renderLatest(m) {
   $("records").textContent = m.record_count;
   $("latest-at").textContent = l ? when(l.created_at) : "";
   const w = l && l.wear_degree;
-  const ch = l && Array.isArray(l.channels) ? l.channels.find((c) => c.name === l.channel) : null;
-  // A single-channel answer carries no per-channel fit: its warnings say "poor fit" instead.
-  const poor = ch && ch.fit ? !!ch.fit.inflated : !!l && (l.warnings || []).some((x) => /^poor fit/.test(x));
-  $("wear-estimate").textContent = w && num(w.estimate)
-    ? w.estimate.toFixed(3) + (poor ? " (poor fit: not used for the alert)" : "")
-    : l ? "– (no wear degree)" : "–";
-  $("wear-estimate").classList.toggle("muted", !!poor);
+  // No wear figure (the model does not fit, or no table): says why, never a number.
+  $("wear-estimate").textContent = wearText(l, m);
+  $("wear-estimate").title = (l && l.wear_note) || "";
+  $("wear-estimate").classList.toggle("muted", !!l && !(w && num(w.estimate)));
   $("wear-interval").textContent = w && num(w.lower) && num(w.upper) ? w.lower.toFixed(3) + " … " + w.upper.toFixed(3) : "–";
+  $("speed").textContent = speedText(l);
+  const load = l && l.operating_state ? l.operating_state.load : undefined;
+  $("load").textContent = load === undefined || load === null ? (l ? "not given" : "–") : String(load);
   const n = l && l.novelty;
   $("novelty-latest").textContent = n && num(n.score)
     ? n.score.toFixed(2) + " (threshold " + fmt(n.threshold, 2) + (n.anomalous ? ", anomalous)" : ")")
@@ -487,6 +550,7 @@ function renderMachine(m) {
   renderGearbox(m);
   renderBaseline(m);
   renderLatest(m);
+  renderFindings(m.latest);
   const dom = timeDomain(m.trend || []);
   renderTrend(m, dom);
   renderNovelty(m, dom);

@@ -3,6 +3,8 @@
 
 use serde::Deserialize;
 
+use crate::condition::Load;
+
 /// The JSON body: one channel, `{"sample_rate_hz": n, "samples": [..], …}`, or several,
 /// `{"sample_rate_hz": n, "channels": {"a1": [..], "a2": [..]}, …}` (exactly one of
 /// `samples` and `channels`; channel names non-empty and distinct, kept in the body's order).
@@ -18,6 +20,8 @@ pub struct JsonRecord {
     pub shaft_hz: Option<f64>,
     pub recorded_at: Option<String>,
     pub sensor: Option<String>,
+    /// `load`: a number, or a label (text that reads as a number is one: `"40"` is 40).
+    pub load: Option<Load>,
 }
 
 /// The members as written, before the one-of rule on `samples` / `channels`.
@@ -37,6 +41,36 @@ struct JsonRecordBody {
     recorded_at: Option<String>,
     #[serde(default)]
     sensor: Option<String>,
+    #[serde(default, deserialize_with = "load_member")]
+    load: Option<Load>,
+}
+
+/// The `load` member: a number, a label ([`Load::parse`]: trimmed, a number when it reads as
+/// one; empty is no load) or `null`.
+fn load_member<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<Load>, D::Error> {
+    struct Visitor;
+    impl serde::de::Visitor<'_> for Visitor {
+        type Value = Option<Load>;
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            f.write_str("a load: a number or a label such as \"high\"")
+        }
+        fn visit_unit<E: serde::de::Error>(self) -> Result<Self::Value, E> {
+            Ok(None)
+        }
+        fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<Self::Value, E> {
+            Ok(Some(Load::Value(v)))
+        }
+        fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<Self::Value, E> {
+            Ok(Some(Load::Value(v as f64)))
+        }
+        fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Self::Value, E> {
+            Ok(Some(Load::Value(v as f64)))
+        }
+        fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Self::Value, E> {
+            Ok(Load::parse(v))
+        }
+    }
+    d.deserialize_any(Visitor)
 }
 
 /// A member that, when present, must hold a `T` (not `null`).
@@ -75,6 +109,7 @@ impl TryFrom<JsonRecordBody> for JsonRecord {
             shaft_hz: b.shaft_hz,
             recorded_at: b.recorded_at,
             sensor: b.sensor,
+            load: b.load,
         })
     }
 }
@@ -157,8 +192,8 @@ impl JsonRecord {
 /// anything it does not take, valid or not.
 pub fn fast_json_record(b: &[u8]) -> Option<JsonRecord> {
     let mut p = JsonCursor { b, i: 0 };
-    let (mut rate, mut samples, mut shaft, mut recorded_at, mut sensor) =
-        (None, None, None, None, None);
+    let (mut rate, mut samples, mut shaft, mut recorded_at, mut sensor, mut load) =
+        (None, None, None, None, None, None);
     p.ws();
     p.eat(b'{')?;
     loop {
@@ -187,6 +222,15 @@ pub fn fast_json_record(b: &[u8]) -> Option<JsonRecord> {
                     Some(p.plain_string()?.to_owned())
                 })
             }
+            "load" if load.is_none() => {
+                load = Some(if p.null() {
+                    None
+                } else if p.b.get(p.i) == Some(&b'"') {
+                    Load::parse(p.plain_string()?)
+                } else {
+                    Some(Load::Value(p.number()?))
+                })
+            }
             _ => return None,
         }
         p.ws();
@@ -207,6 +251,7 @@ pub fn fast_json_record(b: &[u8]) -> Option<JsonRecord> {
         shaft_hz: shaft.flatten(),
         recorded_at: recorded_at.flatten(),
         sensor: sensor.flatten(),
+        load: load.flatten(),
     })
 }
 
@@ -429,6 +474,18 @@ mod tests {
             r#"{"sample_rate_hz": 25600, "channels": {}}"#,
             r#"{"sample_rate_hz": 25600, "channels": null}"#,
             r#"{"sample_rate_hz": 25600, "channels": [[1]]}"#,
+            r#"{"sample_rate_hz": 25600, "samples": [1], "load": "High"}"#,
+            r#"{"sample_rate_hz": 25600, "samples": [1], "load": " 40 "}"#,
+            r#"{"sample_rate_hz": 25600, "samples": [1], "load": 40.5}"#,
+            r#"{"sample_rate_hz": 25600, "samples": [1], "load": -3}"#,
+            r#"{"sample_rate_hz": 25600, "samples": [1], "load": null}"#,
+            r#"{"sample_rate_hz": 25600, "samples": [1], "load": ""}"#,
+            r#"{"sample_rate_hz": 25600, "samples": [1], "load": "h\u00e9"}"#,
+            r#"{"sample_rate_hz": 25600, "samples": [1], "load": true}"#,
+            r#"{"sample_rate_hz": 25600, "samples": [1], "load": [1]}"#,
+            r#"{"sample_rate_hz": 25600, "samples": [1], "load": 1e999}"#,
+            r#"{"sample_rate_hz": 25600, "samples": [1], "load": 1, "load": 2}"#,
+            r#"{"sample_rate_hz": 25600, "channels": {"a": [1]}, "load": "low"}"#,
         ] {
             let fast = JsonRecord::from_json(body.as_bytes()).map_err(|e| e.to_string());
             let slow = serde_record(body).map_err(|e| e.to_string());
@@ -441,7 +498,8 @@ mod tests {
                         a.sample_rate_hz,
                         a.shaft_hz,
                         &a.recorded_at,
-                        &a.sensor
+                        &a.sensor,
+                        &a.load
                     ),
                     (
                         &b.samples,
@@ -449,7 +507,8 @@ mod tests {
                         b.sample_rate_hz,
                         b.shaft_hz,
                         &b.recorded_at,
-                        &b.sensor
+                        &b.sensor,
+                        &b.load
                     ),
                     "{body}"
                 ),
@@ -493,6 +552,28 @@ mod tests {
                 samples: vec![1.0, 2.0]
             }]
         );
+    }
+
+    /// `load` is a number or a label (text that reads as a number is one), read by the fast
+    /// path too; anything else is refused with a message that says what a load is.
+    #[test]
+    fn load_is_a_number_or_a_label() {
+        for (body, want) in [
+            (r#""High""#, Some(Load::Label("High".into()))),
+            (r#"" 40 ""#, Some(Load::Value(40.0))),
+            ("12", Some(Load::Value(12.0))),
+            ("-0.5", Some(Load::Value(-0.5))),
+            ("null", None),
+            ("\"\"", None),
+        ] {
+            let text = format!(r#"{{"sample_rate_hz": 1, "samples": [1, 2], "load": {body}}}"#);
+            let fast = fast_json_record(text.as_bytes()).expect("the fast path takes a load");
+            assert_eq!(fast.load, want, "{body}");
+        }
+        let e = JsonRecord::from_json(br#"{"sample_rate_hz": 1, "samples": [1], "load": true}"#)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("a load: a number or a label"), "{e}");
     }
 
     /// Each mistake in the choice of form gets its own serde_json error, the same through

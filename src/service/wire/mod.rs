@@ -10,6 +10,8 @@ use serde::Deserialize;
 pub use json::{JsonRecord, fast_json_record};
 
 use super::error::{ApiError, ApiResult, problem_from_error};
+use super::machines::MAX_TACHO_PPR;
+use crate::condition::Load;
 
 /// Body formats the endpoint takes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -47,21 +49,48 @@ impl BodyFormat {
     }
 }
 
-/// Query parameters (for the non-JSON bodies; `shaft_hz`, `recorded_at`, `sensor` also with
-/// JSON, where the body wins).
+/// Query parameters (for the non-JSON bodies; `shaft_hz`, `recorded_at`, `sensor`, `load`
+/// also with JSON, where the body wins).
 #[derive(Debug, Default, Deserialize)]
 pub struct RecordQuery {
     sample_rate_hz: Option<String>,
     shaft_hz: Option<String>,
     recorded_at: Option<String>,
     sensor: Option<String>,
+    /// The load the record was taken at: a number or a label ([`Load::parse`]).
+    load: Option<String>,
     /// Diagnose only this channel of a multichannel record (a name or a 0-based index).
     pub channel: Option<String>,
     /// `true`: the record is healthy, part of the machine's baseline.
     baseline: Option<String>,
+    /// The tachometer's pulses per input-shaft revolution, for this record (overrides the
+    /// machine's `tacho_ppr`).
+    tacho_ppr: Option<String>,
 }
 
+/// Longest load label.
+pub const MAX_LOAD_LABEL: usize = 100;
+
 impl RecordQuery {
+    /// The `tacho_ppr` parameter: a whole number from 1 to [`MAX_TACHO_PPR`].
+    pub fn tacho_ppr(&self) -> ApiResult<Option<usize>> {
+        let Some(s) = &self.tacho_ppr else {
+            return Ok(None);
+        };
+        match s.trim().parse::<i64>() {
+            Ok(n) if (1..=MAX_TACHO_PPR).contains(&n) => Ok(Some(n as usize)),
+            _ => Err(ApiError::bad_request(
+                "invalid-query",
+                "Invalid query parameter",
+                format!(
+                    "`tacho_ppr` is the tachometer's pulses per input-shaft revolution, a whole \
+                     number from 1 to {MAX_TACHO_PPR}, got `{s}`"
+                ),
+            )
+            .with("parameter", "tacho_ppr")),
+        }
+    }
+
     /// The `baseline` flag.
     pub fn baseline(&self) -> ApiResult<bool> {
         match self.baseline.as_deref() {
@@ -98,8 +127,9 @@ fn decode_binary(
     format: BodyFormat,
     bytes: &[u8],
     sample_rate: Option<f64>,
+    pulses: Option<&str>,
 ) -> ApiResult<(Channels, f64)> {
-    use crate::record::{Format, ReadOptions, parse_record_channels};
+    use crate::record::{Format, ReadOptions, parse_record_channels_with_pulses};
     let f = match format {
         BodyFormat::Csv => Format::Csv,
         BodyFormat::F32 => Format::F32,
@@ -111,7 +141,7 @@ fn decode_binary(
         sample_rate,
         column: None,
     };
-    let r = parse_record_channels(bytes, f, &opts, "body").map_err(|e| {
+    let r = parse_record_channels_with_pulses(bytes, f, &opts, "body", pulses).map_err(|e| {
         let mut p = problem_from_error(&e);
         // The parsers speak CLI; a web client sets a query parameter.
         p.detail = p
@@ -153,6 +183,8 @@ pub struct Decoded {
     pub shaft_hz: Option<f64>,
     pub recorded_at: Option<String>,
     pub sensor: Option<String>,
+    /// The load the record was taken at (body, else query).
+    pub load: Option<Load>,
 }
 
 fn too_many_samples(samples: usize, limit: usize) -> ApiError {
@@ -170,11 +202,41 @@ fn too_many_samples(samples: usize, limit: usize) -> ApiError {
 
 impl Decoded {
     /// The channels to diagnose: the `channel` query parameter's (by name or 0-based index),
-    /// else those the machine lists, else all.
+    /// else those the machine lists, else all — never the tachometer's (index `tacho`), which
+    /// gives the speed.
     pub fn select(
         &self,
         wanted: Option<&str>,
         machine: Option<&[String]>,
+        tacho: Option<usize>,
+    ) -> ApiResult<Vec<usize>> {
+        let picked = self.select_any(wanted, machine, tacho)?;
+        if picked.is_empty() || tacho.is_some_and(|t| picked.contains(&t)) {
+            let t = &self.channels[tacho.unwrap_or(0)].0;
+            return Err(ApiError::unprocessable(
+                "no-vibration-channel",
+                "No channel to diagnose",
+                format!(
+                    "channel `{t}` is the tachometer: it gives the record's speed and is not \
+                     diagnosed, and the record has no other channel {}; send the vibration \
+                     channels with it",
+                    if wanted.is_some() {
+                        "chosen (the `channel` query parameter names the tachometer)"
+                    } else {
+                        "to diagnose"
+                    }
+                ),
+            )
+            .with("tacho_channel", t.as_str()));
+        }
+        Ok(picked)
+    }
+
+    fn select_any(
+        &self,
+        wanted: Option<&str>,
+        machine: Option<&[String]>,
+        tacho: Option<usize>,
     ) -> ApiResult<Vec<usize>> {
         let names = || {
             self.channels
@@ -200,11 +262,13 @@ impl Decoded {
                 .with("channel", w)),
             };
         }
+        let vibration = (0..self.channels.len()).filter(|i| Some(*i) != tacho);
         if let Some(list) = machine {
-            let picked: Vec<usize> = (0..self.channels.len())
+            let picked: Vec<usize> = vibration
+                .clone()
                 .filter(|i| list.contains(&self.channels[*i].0))
                 .collect();
-            if picked.is_empty() && self.channels.len() > 1 {
+            if picked.is_empty() && self.channels.len() > 1 + usize::from(tacho.is_some()) {
                 return Err(ApiError::unprocessable(
                     "unknown-channel",
                     "Unknown channel",
@@ -221,7 +285,7 @@ impl Decoded {
                 return Ok(picked);
             }
         }
-        Ok((0..self.channels.len()).collect())
+        Ok(vibration.collect())
     }
 
     /// The one channel of a record an endpoint needs one of: the `channel` query parameter's,
@@ -242,22 +306,26 @@ impl Decoded {
                 ),
             ));
         }
-        let i = self.select(wanted, None)?[0];
+        let i = self.select(wanted, None, None)?[0];
         Ok(&self.channels[i].1)
     }
 }
 
 /// Decode and validate a record body of `format` (JSON body fields win over the query),
-/// the same for every endpoint that takes a record.
+/// the same for every endpoint that takes a record. The channel named `pulses` (the
+/// machine's tachometer, when the record has it) is checked as a pulse train
+/// ([`crate::record::check_pulses`]): pulses at a supply rail are not a clipped record.
 pub fn decode(
     format: BodyFormat,
     q: &RecordQuery,
     bytes: &[u8],
     limits: &crate::configuration::Limits,
+    pulses: Option<&str>,
 ) -> ApiResult<Decoded> {
     let mut shaft = parse_number("shaft_hz", &q.shaft_hz)?;
     let mut recorded_at = q.recorded_at.clone();
     let mut sensor = q.sensor.clone();
+    let mut load = q.load.as_deref().and_then(Load::parse);
     let (channels, fs) = match format {
         BodyFormat::Json => {
             let mut r = JsonRecord::from_json(bytes).map_err(|e| {
@@ -285,6 +353,9 @@ pub fn decode(
             if r.sensor.is_some() {
                 sensor = r.sensor.take();
             }
+            if r.load.is_some() {
+                load = r.load.take();
+            }
             let fs = r.sample_rate_hz;
             let chans = r.into_channels();
             (
@@ -299,7 +370,12 @@ pub fn decode(
             // Refused before decoding: no vector of more samples than allowed is built.
             return Err(too_many_samples(bytes.len() / 4, limits.max_samples));
         }
-        f => decode_binary(f, bytes, parse_number("sample_rate_hz", &q.sample_rate_hz)?)?,
+        f => decode_binary(
+            f,
+            bytes,
+            parse_number("sample_rate_hz", &q.sample_rate_hz)?,
+            pulses,
+        )?,
     };
     if let Some(t) = &recorded_at
         && crate::time::parse_rfc3339(t).is_none()
@@ -321,6 +397,19 @@ pub fn decode(
             "`sensor` is at most 200 characters",
         ));
     }
+    if let Some(Load::Label(l)) = &load
+        && l.chars().count() > MAX_LOAD_LABEL
+    {
+        return Err(ApiError::bad_request(
+            "invalid-load",
+            "Invalid load",
+            format!(
+                "`load` is a number or a label of at most {MAX_LOAD_LABEL} characters (such as \
+                 `high` or `75 %`), got a label of {} characters",
+                l.chars().count()
+            ),
+        ));
+    }
     let total: usize = channels.iter().map(|c| c.1.len()).sum();
     if total > limits.max_samples {
         return Err(too_many_samples(total, limits.max_samples));
@@ -330,7 +419,11 @@ pub fn decode(
     // not). A multichannel record's error names its channel.
     if format == BodyFormat::Json {
         for (name, x) in &channels {
-            let r = crate::record::check_signal(x);
+            let r = if pulses == Some(name.as_str()) {
+                crate::record::check_pulses(x)
+            } else {
+                crate::record::check_signal(x)
+            };
             let r = if channels.len() > 1 {
                 r.map_err(|e| e.in_channel(name.clone()))
             } else {
@@ -347,5 +440,6 @@ pub fn decode(
         shaft_hz: shaft,
         recorded_at,
         sensor,
+        load,
     })
 }

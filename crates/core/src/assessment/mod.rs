@@ -329,7 +329,9 @@ fn assess_channel(
 
 /// The table's reading of a channel at the measured speed, with the wear withheld when the
 /// model does not fit. A speed outside the table is not an error for a channel with a
-/// baseline (the baseline still judges it): `(None, Some(why))`.
+/// baseline (the baseline still judges it) nor for a record sent as healthy (it becomes part
+/// of that baseline: a machine's healthy records span its speeds, the table only ±15 % of the
+/// nominal one): `(None, Some(why))`.
 fn read_table(
     rec: &Record,
     facts: &RecordFacts,
@@ -347,7 +349,7 @@ fn read_table(
         .or(facts.shaft_hz);
     let mut r = match d.read(rec, shaft_hz, machine.calibration) {
         Ok(r) => r,
-        Err(e @ crate::Error::SpeedOutOfBand { .. }) if has_baseline => {
+        Err(e @ crate::Error::SpeedOutOfBand { .. }) if has_baseline || facts.declared_healthy => {
             return Ok((
                 None,
                 Some(format!(

@@ -32,7 +32,7 @@ use crate::error::{Error, Result};
 pub use self::channels::{Channel, MultiRecord};
 pub use self::checks::{
     CLIP_MIN_COUNT, CLIP_MIN_FRACTION, CLIP_MIN_RUN, CLIP_PILE_UP, MAX_SAMPLE_RATE_HZ,
-    check_channel, check_sample_rate, check_signal,
+    check_channel, check_pulses, check_sample_rate, check_signal,
 };
 use self::csv::{csv_channels, parse_csv};
 pub use self::gzip::{MAX_DECOMPRESSED_BYTES, gunzip};
@@ -189,6 +189,19 @@ pub fn parse_record_channels(
     opts: &ReadOptions,
     origin: &str,
 ) -> Result<MultiRecord> {
+    parse_record_channels_with_pulses(bytes, format, opts, origin, None)
+}
+
+/// [`parse_record_channels`], except that the channel named `pulses` (a tachometer's, when
+/// the record has it) passes [`check_pulses`] instead of [`check_signal`]: pulses at a
+/// supply rail are not a clipped record.
+pub fn parse_record_channels_with_pulses(
+    bytes: &[u8],
+    format: Format,
+    opts: &ReadOptions,
+    origin: &str,
+    pulses: Option<&str>,
+) -> Result<MultiRecord> {
     if let Some(fs) = opts.sample_rate {
         check_sample_rate(fs)?;
     }
@@ -199,7 +212,11 @@ pub fn parse_record_channels(
     };
     check_sample_rate(rec.sample_rate)?;
     for c in &rec.channels {
-        check_channel(c)?;
+        if pulses == Some(c.name.as_str()) {
+            check_pulses(&c.samples).map_err(|e| e.in_channel(&c.name))?;
+        } else {
+            check_channel(c)?;
+        }
     }
     Ok(rec)
 }

@@ -54,6 +54,51 @@ fn check_signal_refuses_empty_nan_flat_and_clipped() {
     ));
 }
 
+/// A tachometer's pulses sit at the supply rail (an open collector pulled up to 5 V: exactly
+/// 5.0 for many samples in a row) between noisy lows: refused as clipped by `check_signal`,
+/// accepted as a pulse train by `check_pulses` (which still refuses a flat channel), and only
+/// for the channel named as the tachometer.
+#[test]
+fn a_tachometer_square_wave_is_a_pulse_train_not_a_clipped_record() {
+    let square: Vec<f64> = (0..20_000)
+        .map(|i| {
+            if (i % 50) < 15 {
+                5.0
+            } else {
+                0.02 * (i as f64 * 0.37).sin()
+            }
+        })
+        .collect();
+    assert!(matches!(
+        check_signal(&square),
+        Err(Error::ClippedRecord { .. })
+    ));
+    assert!(check_pulses(&square).is_ok());
+    assert!(matches!(
+        check_pulses(&[5.0; 100]),
+        Err(Error::FlatRecord { .. })
+    ));
+    let mut csv = String::from("tacho,a1\n");
+    for (i, v) in square.iter().enumerate() {
+        csv.push_str(&format!("{v},{}\n", (i as f64 * 0.37).sin()));
+    }
+    let opts = ReadOptions {
+        sample_rate: Some(20_000.0),
+        ..Default::default()
+    };
+    let e = parse_record_channels(csv.as_bytes(), Format::Csv, &opts, "body").unwrap_err();
+    assert!(e.to_string().contains("tacho"), "{e}");
+    let r = parse_record_channels_with_pulses(
+        csv.as_bytes(),
+        Format::Csv,
+        &opts,
+        "body",
+        Some("tacho"),
+    )
+    .unwrap();
+    assert_eq!(r.names(), ["tacho", "a1"]);
+}
+
 #[test]
 fn check_signal_accepts_unclipped_records_even_coarsely_quantised() {
     // Continuous values: every extreme occurs once.
