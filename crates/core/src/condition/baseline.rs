@@ -15,17 +15,23 @@
 //! holds one or two records per state (the helical data: one per speed and load).
 //!
 //! # Scale and threshold (leave-one-out that respects states)
-//! Each baseline record is predicted from the others (rules 1–2, else the nearest record of
-//! its load at any distance): from the other records of its state when it has some (their
-//! spread is the repeatability), else from neighbouring speeds (a baseline of one record per
-//! state: the spread then includes the change between speeds). Per feature, the
-//! scale is `max(1.4826 · MAD, 0.1)` of these residuals (the 0.1 floor: a 10 % change); a
+//! Each baseline record is predicted from the others, twice:
+//! * **within** its state: from the other records of its state and load (when it has some):
+//!   their spread is the repeatability, what a record judged **at a baseline state** differs
+//!   by;
+//! * **across** states: with every record of its state left out, from the neighbouring speeds
+//!   (rules 2–3, the nearest at any distance when no interpolation reaches): the spread then
+//!   includes the change between speeds, what a record judged **between baseline states**
+//!   differs by.
+//!
+//! For each, per feature, the scale is `max(1.4826 · MAD, 0.1)` of the residuals (the 0.1
+//! floor: a 10 % change) and the threshold the largest leave-one-out score (at least 3); a
 //! record's `z` per feature is `(value − reference) / scale`, its **score** the RMS of its
-//! [`TOP_K`] largest `|z|` (as [`crate::novelty`]). The **threshold** is the largest
-//! leave-one-out score (at least 3). With one record per state, the leave-one-out residuals
-//! include the change from one speed to the next, which a record judged at a covered state
-//! does not have: the scale and threshold then err towards missing a small change rather
-//! than raising a false alarm.
+//! [`TOP_K`] largest `|z|` (as [`crate::novelty`]). A record at a baseline state is judged with
+//! the *within* calibration, any other with the *across* one. A baseline of one record per
+//! state has no *within* residuals and uses *across* for both: its scale and threshold then
+//! include the change from one speed to the next, and err towards missing a small change
+//! rather than raising a false alarm; one of a single state uses *within* for both.
 
 use serde::{Deserialize, Serialize};
 
@@ -110,9 +116,10 @@ pub struct StateScore {
 #[derive(Debug, Clone, PartialEq)]
 pub struct StateBaseline {
     records: Vec<StateRecord>,
-    scale: BTreeMap<String, f64>,
-    threshold: f64,
-    loo_scores: Vec<f64>,
+    /// For a record at a baseline state: from records predicted by others of their state.
+    within: Calibration,
+    /// For a record between baseline states: from records predicted by other states.
+    across: Calibration,
 }
 
 fn candidates<'a>(records: &'a [StateRecord], load: Option<&Load>) -> Vec<&'a StateRecord> {
@@ -182,6 +189,51 @@ fn reference(cands: &[&StateRecord], f: f64, any_distance: bool) -> Option<Refer
     })
 }
 
+/// Per-feature robust scales (`max(1.4826 · MAD, floor)`) of a set of residuals (features
+/// with at least [`MIN_STATE_RECORDS`] residuals), the residuals' leave-one-out scores at
+/// those scales, and the threshold (the largest score, at least 3). `None` with fewer than
+/// [`MIN_STATE_RECORDS`] residuals.
+fn calibrate(residuals: &[BTreeMap<String, f64>]) -> Option<Calibration> {
+    let residuals: Vec<&BTreeMap<String, f64>> =
+        residuals.iter().filter(|r| !r.is_empty()).collect();
+    if residuals.len() < MIN_STATE_RECORDS {
+        return None;
+    }
+    let mut per: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+    for r in &residuals {
+        for (k, v) in *r {
+            per.entry(k.clone()).or_default().push(*v);
+        }
+    }
+    let scale: BTreeMap<String, f64> = per
+        .into_iter()
+        .filter(|(_, v)| v.len() >= MIN_STATE_RECORDS)
+        .map(|(k, mut v)| {
+            let m = median(&mut v);
+            let mut dev: Vec<f64> = v.iter().map(|x| (x - m).abs()).collect();
+            (k, (1.4826 * median(&mut dev)).max(SCALE_FLOOR))
+        })
+        .collect();
+    let loo_scores: Vec<f64> = residuals
+        .iter()
+        .map(|r| score_of(&departures(r, &scale)))
+        .collect();
+    let threshold = loo_scores.iter().fold(MIN_THRESHOLD, |a, &b| a.max(b));
+    Some(Calibration {
+        scale,
+        threshold,
+        loo_scores,
+    })
+}
+
+/// Scales and threshold for one kind of reference.
+#[derive(Debug, Clone, PartialEq)]
+struct Calibration {
+    scale: BTreeMap<String, f64>,
+    threshold: f64,
+    loo_scores: Vec<f64>,
+}
+
 impl StateBaseline {
     /// Fit from healthy records with their states (at least [`MIN_STATE_RECORDS`]).
     pub fn fit(records: Vec<StateRecord>) -> Result<StateBaseline> {
@@ -192,52 +244,26 @@ impl StateBaseline {
                 records.len()
             )));
         }
-        let residuals: Vec<BTreeMap<String, f64>> = (0..records.len())
-            .map(|i| Self::loo_residual(&records, i))
-            .collect();
-        let mut per: BTreeMap<String, Vec<f64>> = BTreeMap::new();
-        for r in &residuals {
-            for (k, v) in r {
-                per.entry(k.clone()).or_default().push(*v);
+        let n = records.len();
+        let by_state: Vec<_> = (0..n).map(|i| loo_residual(&records, i, true)).collect();
+        let by_record: Vec<_> = (0..n).map(|i| loo_residual(&records, i, false)).collect();
+        let (across, within) = match (calibrate(&by_state), calibrate(&by_record)) {
+            (Some(a), Some(w)) => (a, w),
+            (Some(a), None) => (a.clone(), a),
+            (None, Some(w)) => (w.clone(), w),
+            (None, None) => {
+                return Err(Error::Signal(
+                    "the baseline's records cannot predict one another (fewer than 3 have a \
+                     neighbour of their load): add healthy records"
+                        .into(),
+                ));
             }
-        }
-        let scale: BTreeMap<String, f64> = per
-            .into_iter()
-            .filter(|(_, v)| v.len() >= MIN_STATE_RECORDS)
-            .map(|(k, mut v)| {
-                let m = median(&mut v);
-                let mut dev: Vec<f64> = v.iter().map(|x| (x - m).abs()).collect();
-                (k, (1.4826 * median(&mut dev)).max(SCALE_FLOOR))
-            })
-            .collect();
-        let loo_scores: Vec<f64> = residuals
-            .iter()
-            .map(|r| score_of(&departures(r, &scale)))
-            .collect();
-        let threshold = loo_scores.iter().fold(MIN_THRESHOLD, |a, &b| a.max(b));
+        };
         Ok(StateBaseline {
             records,
-            scale,
-            threshold,
-            loo_scores,
+            within,
+            across,
         })
-    }
-
-    /// Record `i`'s residual from a reference made without it.
-    fn loo_residual(records: &[StateRecord], i: usize) -> BTreeMap<String, f64> {
-        let me = &records[i];
-        let f = me.state.shaft_hz;
-        let others: Vec<StateRecord> = records
-            .iter()
-            .enumerate()
-            .filter(|(j, _)| *j != i)
-            .map(|(_, r)| r.clone())
-            .collect();
-        let cands = candidates(&others, me.state.load.as_ref());
-        match reference(&cands, f, true) {
-            Some(r) => residual(&me.values, &r.values),
-            None => BTreeMap::new(),
-        }
     }
 
     /// The records' coverage, by load.
@@ -315,12 +341,17 @@ impl StateBaseline {
         values: &BTreeMap<String, f64>,
     ) -> std::result::Result<StateScore, String> {
         let r = self.reference(state)?;
-        let d = departures(&residual(values, &r.values), &self.scale);
+        let cal = if r.how == "same-state" {
+            &self.within
+        } else {
+            &self.across
+        };
+        let d = departures(&residual(values, &r.values), &cal.scale);
         let score = score_of(&d);
         Ok(StateScore {
             score,
-            threshold: self.threshold,
-            anomalous: score > self.threshold,
+            threshold: cal.threshold,
+            anomalous: score > cal.threshold,
             reference: r.how,
             reference_hz: r.from_hz,
             top: d.iter().take(TOP_K).cloned().collect(),
@@ -328,17 +359,46 @@ impl StateBaseline {
         })
     }
 
+    /// The threshold of a record at a baseline state.
     pub fn threshold(&self) -> f64 {
-        self.threshold
+        self.within.threshold
     }
 
-    /// The baseline records' leave-one-out scores (record order).
+    /// The leave-one-out scores the same-state threshold comes from.
     pub fn loo_scores(&self) -> &[f64] {
-        &self.loo_scores
+        &self.within.loo_scores
     }
 
     pub fn records(&self) -> usize {
         self.records.len()
+    }
+}
+
+/// Record `i`'s residual from a reference made without it: `whole_state` — without every
+/// record of its state and load (how a record between baseline speeds is judged; the nearest
+/// record at any distance when no interpolation reaches); else without it alone, and only
+/// when its state has other records (how a record at a baseline state is judged). Empty when
+/// there is no such reference.
+fn loo_residual(records: &[StateRecord], i: usize, whole_state: bool) -> BTreeMap<String, f64> {
+    let me = &records[i];
+    let f = me.state.shaft_hz;
+    let same_state = |r: &StateRecord| {
+        (r.state.shaft_hz / f - 1.0).abs() <= SAME_STATE
+            && match (&r.state.load, &me.state.load) {
+                (Some(a), Some(b)) => a.same(b),
+                _ => true,
+            }
+    };
+    let others: Vec<StateRecord> = records
+        .iter()
+        .enumerate()
+        .filter(|(j, r)| *j != i && (!whole_state || !same_state(r)))
+        .map(|(_, r)| r.clone())
+        .collect();
+    let cands = candidates(&others, me.state.load.as_ref());
+    match reference(&cands, f, whole_state) {
+        Some(r) if whole_state || r.how == "same-state" => residual(&me.values, &r.values),
+        _ => BTreeMap::new(),
     }
 }
 
@@ -430,5 +490,32 @@ mod tests {
         assert!(e.contains("near 60.00 Hz") && e.contains("load Low"), "{e}");
         let e = b.score(&st(40.0, "Medium"), &BTreeMap::new()).unwrap_err();
         assert!(e.contains("load Medium") && e.contains("High"), "{e}");
+    }
+
+    /// Two records per state, a feature that bends with speed (not linear in ln f): a healthy
+    /// record between states is judged with the across-state spread (which holds the bend),
+    /// one at a state with the repeatability — so neither false-alarms, and a shift that is
+    /// small against the bend but large against the repeatability is still caught at a state.
+    #[test]
+    fn within_and_across_state_calibrations() {
+        let mut recs = Vec::new();
+        for (k, f) in [30.0, 35.0, 40.0, 45.0, 50.0].iter().enumerate() {
+            for run in 0..2 {
+                let bend = 0.02 * (f - 40.0f64).powi(2);
+                let noise = 0.02 * ((k * 2 + run) as f64 * 1.7).sin();
+                recs.push(rec(*f, "High", bend + noise));
+            }
+        }
+        let b = StateBaseline::fit(recs).unwrap();
+        let st = |f: f64| rec(f, "High", 0.0).state;
+        let at = |f: f64, v: f64| b.score(&st(f), &BTreeMap::from([("a".into(), v)])).unwrap();
+        let between = at(32.5, 0.02 * 7.5f64.powi(2));
+        assert_eq!(between.reference, "interpolated");
+        assert!(!between.anomalous, "{between:?}");
+        let healthy = at(40.0, 0.01);
+        assert_eq!(healthy.reference, "same-state");
+        assert!(!healthy.anomalous, "{healthy:?}");
+        let shifted = at(40.0, 0.6);
+        assert!(shifted.anomalous, "{shifted:?}");
     }
 }
