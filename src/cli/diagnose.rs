@@ -18,7 +18,7 @@ use crate::assessment::{
 };
 use crate::condition::Load;
 use crate::diagnosis::DiagnoseOptions;
-use crate::record::{Column, Format, ReadOptions, read_record, read_record_channels};
+use crate::record::{Column, Format, ReadOptions, read_record, read_record_channels_with_pulses};
 use crate::signal::lines::SEGMENT_PERIODS;
 use crate::signature::SensorQuantity;
 use crate::signature::precompute::{
@@ -433,7 +433,7 @@ fn load_record(path: &std::path::Path, a: &DiagnoseArgs, opts: &ReadOptions) -> 
             tacho: None,
         });
     }
-    let m = read_record_channels(path, opts)?;
+    let m = read_record_channels_with_pulses(path, opts, a.tacho_column.as_deref())?;
     let tacho = match &a.tacho_column {
         Some(t) => Some(TachoChannel {
             name: m.channel(t)?.name.clone(),

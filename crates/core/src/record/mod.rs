@@ -142,6 +142,17 @@ pub fn read_record_channels(path: &Path, opts: &ReadOptions) -> Result<MultiReco
     parse_record_channels(&bytes, format, opts, &name)
 }
 
+/// [`read_record_channels`], except that the channel `pulses` names (a tachometer's) passes
+/// [`check_pulses`] instead of [`check_signal`] ([`parse_record_channels_with_pulses`]).
+pub fn read_record_channels_with_pulses(
+    path: &Path,
+    opts: &ReadOptions,
+    pulses: Option<&str>,
+) -> Result<MultiRecord> {
+    let (bytes, format, name) = read_file(path, opts)?;
+    parse_record_channels_with_pulses(&bytes, format, opts, &name, pulses)
+}
+
 /// Parse a record from bytes (already decompressed); `origin` names it in errors.
 pub fn parse_record(
     bytes: &[u8],
