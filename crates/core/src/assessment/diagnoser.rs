@@ -241,7 +241,20 @@ impl TableDiagnoser {
         shaft_hz: Option<f64>,
         calibration: Option<&MachineCalibration>,
     ) -> crate::Result<TableReading> {
-        let opts = self.options(shaft_hz);
+        self.read_with(rec, shaft_hz, calibration, true)
+    }
+
+    /// [`TableDiagnoser::read`]; `track_orders: false` leaves the order analysis to the caller
+    /// (who has the shaft's angle from a tachometer).
+    pub fn read_with(
+        &self,
+        rec: &Record,
+        shaft_hz: Option<f64>,
+        calibration: Option<&MachineCalibration>,
+        track_orders: bool,
+    ) -> crate::Result<TableReading> {
+        let mut opts = self.options(shaft_hz);
+        opts.track_orders = track_orders;
         let held = calibration
             .map(|c| held_effects(c).map(|h| (c, h)))
             .transpose()?;

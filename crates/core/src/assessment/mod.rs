@@ -34,7 +34,8 @@ use crate::condition::{Finding, Load, OperatingState, StateBaseline};
 use crate::diagnosis::{Diagnosis, Fit, WearDegree};
 use crate::gearbox::Gearbox;
 use crate::novelty::{
-    MIN_BASELINE_RECORDS, MachineBaseline, Novelty, RecordFeatures, record_features_with,
+    MIN_BASELINE_RECORDS, MachineBaseline, Novelty, OrderAnalysis, RecordFeatures,
+    record_features_with,
 };
 use crate::record::Record;
 
@@ -283,9 +284,24 @@ fn assess_channel(
 ) -> crate::Result<ChannelAssessment> {
     let has_baseline =
         machine.baselines.contains_key(&name) || machine.state_baselines.contains_key(&name);
-    let (reading, table_miss) = read_table(rec, facts, machine, measured, has_baseline)?;
+    // With the shaft's measured angle, every shaft's TSA comes from it, and the table's
+    // reading carries that instead of tracking the record a second time.
+    let at_angle = condition::order_at(rec, machine, measured);
+    let (mut reading, table_miss) = read_table(
+        rec,
+        facts,
+        machine,
+        measured,
+        has_baseline,
+        at_angle.is_none(),
+    )?;
+    if let (Some(r), Some(a)) = (reading.as_mut(), &at_angle) {
+        r.diagnosis.order = Some(a.clone());
+        r.diagnosis.order_error = None;
+        r.order = Some(a.clone());
+    }
     stage("diagnosis");
-    let features = channel_features(rec, facts, machine, measured, reading.as_ref())?;
+    let features = channel_features(rec, facts, machine, measured, reading.as_ref(), at_angle)?;
     let judged = machine
         .state_baselines
         .get(&name)
@@ -338,6 +354,7 @@ fn read_table(
     machine: &Machine,
     measured: &Measured,
     has_baseline: bool,
+    track_orders: bool,
 ) -> crate::Result<(Option<TableReading>, Option<String>)> {
     let Some(d) = machine.diagnoser else {
         return Ok((None, None));
@@ -347,7 +364,7 @@ fn read_table(
         .as_ref()
         .map(|s| s.shaft_hz)
         .or(facts.shaft_hz);
-    let mut r = match d.read(rec, shaft_hz, machine.calibration) {
+    let mut r = match d.read_with(rec, shaft_hz, machine.calibration, track_orders) {
         Ok(r) => r,
         Err(e @ crate::Error::SpeedOutOfBand { .. }) if has_baseline || facts.declared_healthy => {
             return Ok((
@@ -382,6 +399,7 @@ fn channel_features(
     machine: &Machine,
     measured: &Measured,
     reading: Option<&TableReading>,
+    at_angle: Option<OrderAnalysis>,
 ) -> crate::Result<RecordFeatures> {
     let gearbox = machine.gearbox;
     let hint = measured
@@ -395,7 +413,6 @@ fn channel_features(
     // defaults to would track 29 teeth in another gearbox's records (noise features that make
     // a baseline unstable); without one the features are description-free.
     let gb = machine.described.then_some(gearbox);
-    let at_angle = condition::order_at(rec, machine, measured);
     // Without a measured angle, a described machine's diagnosis ran on its own gearbox's
     // table and tracked the record already: its order analysis is reused — when the f1 it
     // tracked from agrees (±1 %, its tracker's search) with the speed the features would

@@ -155,11 +155,14 @@ fn diagnose_inner(
     let fs = inp.fs;
     // The f1 found above is precise: the tracker searches its line within ±1 %.
     let spectrum = spectrum.into_whole();
-    let (order, order_error) =
+    let (order, order_error) = if !opts.track_orders {
+        (None, None)
+    } else {
         match order_analysis(x, fs, &inp.gb.shaft_train(), f1, 0.01, spectrum.as_ref()) {
             Ok(a) => (Some(a), None),
             Err(e) => (None, Some(e.to_string())),
-        };
+        }
+    };
     let diagnosis = Diagnosis {
         wear_degree: wear,
         wear_note: None,

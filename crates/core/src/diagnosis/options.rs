@@ -31,6 +31,10 @@ pub struct DiagnoseOptions {
     /// search are tried and the best-fitting one is kept (held-out simulations stay below ≈ 1.7,
     /// a wrong f1 gave 30–150).
     pub reselect_chi2_per_feature: f64,
+    /// Track the input shaft from the f1 line and compute every shaft's TSA
+    /// ([`Diagnosis::order`](super::Diagnosis)); `false` when the caller has the shaft's angle
+    /// already (a tachometer) and computes them from it.
+    pub track_orders: bool,
 }
 
 /// Relative tolerance on the table's Ω1 band edges for a measured f1.
@@ -54,6 +58,7 @@ impl Default for DiagnoseOptions {
             ea_step: 0.0025,
             max_chi2_per_feature: 5.0,
             reselect_chi2_per_feature: 2.0,
+            track_orders: true,
         }
     }
 }
