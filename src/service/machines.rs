@@ -230,7 +230,7 @@ pub struct MachineBody {
 /// The default name of a record's tachometer channel, for a machine that names none.
 pub const DEFAULT_TACHO_CHANNEL: &str = "tacho";
 /// Most tachometer pulses per revolution accepted (a fine shaft encoder).
-pub const MAX_TACHO_PPR: i64 = 10_000;
+pub const MAX_TACHO_PPR: i64 = crate::condition::state::MAX_PULSES_PER_REV as i64;
 
 /// Check a machine's tachometer settings: `tacho_channel` a channel name (1 to 64
 /// characters) that is not among the `channels` to diagnose, `tacho_ppr` from 1 to

@@ -69,12 +69,9 @@ use crate::{Error, Result};
 
 /// Fewest records a baseline is fitted from.
 pub const MIN_BASELINE_RECORDS: usize = 3;
-/// Smallest robust scale of a feature (ln units).
-pub const SCALE_FLOOR: f64 = 0.1;
-/// Number of largest |z| the score averages (in square).
-pub const TOP_K: usize = 3;
-/// Smallest threshold: a record is never anomalous with its top features within 3 scales.
-pub const MIN_THRESHOLD: f64 = 3.0;
+/// The scoring constants both baselines share (the state-aware one of [`crate::condition`] and
+/// this pooled one).
+pub use crate::condition::baseline::{MIN_THRESHOLD, SCALE_FLOOR, TOP_K};
 
 /// What a baseline is made of: the features of one record (one channel).
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]

@@ -10,8 +10,8 @@ use serde::Deserialize;
 pub use json::{JsonRecord, fast_json_record};
 
 use super::error::{ApiError, ApiResult, problem_from_error};
-use super::machines::MAX_TACHO_PPR;
 use crate::condition::Load;
+use crate::condition::state::MAX_PULSES_PER_REV;
 
 /// Body formats the endpoint takes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -72,19 +72,19 @@ pub struct RecordQuery {
 pub const MAX_LOAD_LABEL: usize = 100;
 
 impl RecordQuery {
-    /// The `tacho_ppr` parameter: a whole number from 1 to [`MAX_TACHO_PPR`].
+    /// The `tacho_ppr` parameter: a whole number from 1 to [`MAX_PULSES_PER_REV`].
     pub fn tacho_ppr(&self) -> ApiResult<Option<usize>> {
         let Some(s) = &self.tacho_ppr else {
             return Ok(None);
         };
         match s.trim().parse::<i64>() {
-            Ok(n) if (1..=MAX_TACHO_PPR).contains(&n) => Ok(Some(n as usize)),
+            Ok(n) if (1..=MAX_PULSES_PER_REV as i64).contains(&n) => Ok(Some(n as usize)),
             _ => Err(ApiError::bad_request(
                 "invalid-query",
                 "Invalid query parameter",
                 format!(
                     "`tacho_ppr` is the tachometer's pulses per input-shaft revolution, a whole \
-                     number from 1 to {MAX_TACHO_PPR}, got `{s}`"
+                     number from 1 to {MAX_PULSES_PER_REV}, got `{s}`"
                 ),
             )
             .with("parameter", "tacho_ppr")),

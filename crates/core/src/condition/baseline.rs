@@ -36,11 +36,16 @@
 use serde::{Deserialize, Serialize};
 
 use super::state::{Load, OperatingState};
-use crate::novelty::{MIN_THRESHOLD, SCALE_FLOOR, TOP_K};
 use crate::signal::median;
 use crate::{Error, Result};
 use std::collections::BTreeMap;
 
+/// Smallest robust scale of a feature (ln units).
+pub const SCALE_FLOOR: f64 = 0.1;
+/// Number of largest |z| the score averages (in square).
+pub const TOP_K: usize = 3;
+/// Smallest threshold: a record is never anomalous with its top features within 3 scales.
+pub const MIN_THRESHOLD: f64 = 3.0;
 /// Records within this relative speed difference are at the same state.
 pub const SAME_STATE: f64 = 0.03;
 /// Largest ratio of the two speeds an interpolation may span.

@@ -32,8 +32,8 @@ use rustfft::num_complex::Complex64;
 
 use super::parts::Parts;
 use crate::Result;
-use crate::novelty::OrderAnalysis;
 use crate::signal::order::{ShaftAngle, angular_resample, samples_per_rev_for};
+use crate::signal::tsa::OrderAnalysis;
 use crate::signal::{PlanCache, Spectrum, Window, amplitude_spectrum, kurtosis, rms};
 
 /// Sideband orders j = 1..=SIDEBANDS around a mesh harmonic.

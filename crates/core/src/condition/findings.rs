@@ -27,9 +27,9 @@
 
 use serde::Serialize;
 
+use super::baseline::TOP_K;
 use super::baseline::{Departure, StateScore};
 use super::parts::{GearPart, Parts};
-use crate::novelty::TOP_K;
 
 /// Smallest z that counts as evidence.
 pub const Z_EVIDENCE: f64 = 2.0;

@@ -22,6 +22,9 @@ use crate::{Error, Result};
 /// Relative half-width of the tacho-less search around the hint: motor slip (2–3 % at full
 /// load) and a setting that is a little off.
 pub const TACHO_LESS_SEARCH: f64 = 0.06;
+/// Most tachometer pulses per input-shaft revolution accepted (an encoder's line count).
+pub const MAX_PULSES_PER_REV: usize = 10_000;
+
 /// Relative half-width of the phase tracker's search around the comb's rate.
 pub const TRACK_SEARCH: f64 = 0.005;
 
