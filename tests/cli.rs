@@ -547,3 +547,14 @@ fn diagnose_judges_each_record_at_its_operating_state() {
     );
     std::fs::remove_dir_all(dir).ok();
 }
+
+/// `serve --dashboard-without-key` says what it does; the old `--open-dashboard` still parses
+/// (a hidden alias), and an unknown flag does not.
+#[test]
+fn serve_dashboard_flag_keeps_its_old_name() {
+    let (ok, out, _) = gearwear(&["serve", "--help"]);
+    assert!(ok && out.contains("--dashboard-without-key"), "{out}");
+    assert!(!out.contains("\n      --open-dashboard"), "{out}");
+    assert!(gearwear(&["serve", "--open-dashboard", "--help"]).0);
+    assert!(!gearwear(&["serve", "--no-such-flag", "--help"]).0);
+}

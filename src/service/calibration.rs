@@ -5,7 +5,7 @@
 //!
 //! Scopes: POST and DELETE need `admin` — a calibration changes how every later record of the
 //! machine is diagnosed, which an `ingest` key (a sensor gateway) should not be able to do;
-//! GET needs `read` (like the other reads, open with `--open-dashboard`).
+//! GET needs `read` (like the other reads, open with `--dashboard-without-key`).
 
 use axum::body::Body;
 use axum::extract::{Path, RawQuery, State};

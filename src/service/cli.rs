@@ -29,8 +29,14 @@ pub struct ServeArgs {
     /// Serve with a signature table computed for another model configuration (logged).
     #[arg(long)]
     pub allow_stale_table: bool,
-    /// Serve the dashboard and the read endpoints without an API key.
-    #[arg(long, env = "GEARWEAR_OPEN_DASHBOARD")]
+    /// Turn off authentication for reads: the dashboard and every read endpoint answer without
+    /// an API key (ingest and admin still need one). For a trusted network only. (Old name:
+    /// --open-dashboard, still accepted.)
+    #[arg(
+        long = "dashboard-without-key",
+        alias = "open-dashboard",
+        env = "GEARWEAR_DASHBOARD_WITHOUT_KEY"
+    )]
     pub open_dashboard: bool,
     /// Log JSON lines.
     #[arg(long, env = "GEARWEAR_LOG_JSON")]
@@ -184,9 +190,11 @@ pub fn keys_cmd(a: KeysArgs) -> Result<()> {
                 }
                 let (row, token) = create_key(store.as_ref(), &scopes, &label).await?;
                 eprintln!(
-                    "created key {} with scopes {} — this is the only time it is shown:",
+                    "created key {} with scopes {} in {} (a service started on another \
+                     database will not know it) — this is the only time it is shown:",
                     row.id,
-                    Scope::join(&row.scopes)
+                    Scope::join(&row.scopes),
+                    redact(&a.database_url)
                 );
                 println!("{token}");
             }
@@ -248,7 +256,8 @@ pub fn serve_cmd(a: ServeArgs) -> Result<()> {
             .await
             .with_context(|| format!("binding {}", settings.address))?;
         let addr = listener.local_addr()?;
-        tracing::info!(%addr, store = store.kind(), open_dashboard = settings.open_dashboard, "gearwear serving; dashboard at http://{addr}/");
+        let database = redact(&settings.database_url);
+        tracing::info!(%addr, store = store.kind(), %database, dashboard_without_key = settings.open_dashboard, "gearwear serving; dashboard at http://{addr}/; API keys live in {database}");
         let state = AppState::new(settings, store.clone(), Arc::new(diagnoser));
         serve(state, listener, shutdown_signal()).await?;
         store.close().await;

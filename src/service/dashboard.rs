@@ -1,7 +1,7 @@
 //! The dashboard: three static files embedded in the binary, polling the JSON API. The page
 //! itself holds no data; its API calls need a read key (asked for on a 401, kept in the
 //! browser's sessionStorage for the tab's life, sent as `Authorization: Bearer`) unless the
-//! operator started the service with `--open-dashboard`.
+//! operator started the service with `--dashboard-without-key`.
 
 use axum::http::{HeaderValue, header};
 use axum::response::{IntoResponse, Response};

@@ -247,7 +247,7 @@ async fn dashboard_updates_when_a_record_arrives() {
     let _ = std::fs::remove_dir_all(&profile);
 }
 
-/// Reads need a key (no `--open-dashboard`): the page asks for one on the 401, keeps it in
+/// Reads need a key (no `--dashboard-without-key`): the page asks for one on the 401, keeps it in
 /// sessionStorage (not localStorage), sends it, and shows the machines; a wrong key is asked
 /// for again.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -3,7 +3,7 @@
 //!
 //! * every route in `gearwear::service::ROUTES` against a table of the scope it needs (a route
 //!   missing from the table fails the test), with no key, malformed headers, unknown, tampered
-//!   and revoked keys, each scope; refusals store nothing; `--open-dashboard` opens reads only;
+//!   and revoked keys, each scope; refusals store nothing; `--dashboard-without-key` opens reads only;
 //! * keys stored hashed (the secret is nowhere in the SQLite file or the PostgreSQL tables);
 //! * body size, sample count and rate limits per key;
 //! * no secret in the logs of the real binary at debug/trace;
