@@ -327,7 +327,8 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
         &facts,
         &machine,
         &mut |_| {},
-    )?;
+    )
+    .map_err(with_flag_hint)?;
     println!("{}", serde_json::to_string_pretty(&assessment)?);
     Ok(())
 }
@@ -471,6 +472,16 @@ fn load_record(path: &std::path::Path, a: &DiagnoseArgs, opts: &ReadOptions) -> 
         sample_rate_hz: m.sample_rate,
         tacho,
     })
+}
+
+/// The library's errors speak of quantities; on the command line, name the flag that gives it.
+fn with_flag_hint(e: crate::Error) -> anyhow::Error {
+    match e {
+        crate::Error::NoMeshLine { .. } => {
+            anyhow::anyhow!("{e}; give --shaft-hz if the input-shaft speed is known")
+        }
+        e => e.into(),
+    }
 }
 
 /// A machine's calibration from the JSON of `GET /v1/machines/{id}/calibration` (or of the

@@ -175,8 +175,8 @@ pub fn measure(
             let h = hint_hz.ok_or_else(|| {
                 Error::Signal(
                     "the shaft rate cannot be measured: give a tachometer channel (with its \
-                     pulses per revolution) or the nominal input-shaft rate (--shaft-hz, \
-                     ?shaft_hz=, or the machine's input_shaft_hz) to search around"
+                     pulses per revolution) or the nominal input-shaft rate to search around \
+                     (the record's, or the machine's configured one)"
                         .into(),
                 )
             })?;

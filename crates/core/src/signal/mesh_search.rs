@@ -247,7 +247,7 @@ pub(crate) fn locate_f1(
             lo_hz: band.0,
             hi_hz: band.1,
             reason: "no spectral peak stands 10 dB above the local floor in the band; give the \
-                     shaft rate (--shaft-hz) or check the sample rate"
+                     input-shaft rate or check the sample rate"
                 .into(),
         });
     }
