@@ -32,6 +32,9 @@ pub struct Measured {
     pub state: Option<OperatingState>,
     /// Why there is no state (a tacho-less track that failed, no hint).
     pub note: Option<String>,
+    /// The described gearbox's parts (a described machine only), for every channel's evidence
+    /// and findings.
+    pub parts: Option<Parts>,
 }
 
 /// How a channel's record compares with the state's baseline.
@@ -52,6 +55,18 @@ pub struct StateJudgement {
 /// Errors: a named tachometer channel that is absent or gives too few pulses (the sender's
 /// data is wrong); a tacho-less track that fails is a note, not an error.
 pub fn measure_record(
+    channels: &[(String, Vec<f64>)],
+    chosen: &[usize],
+    facts: &RecordFacts,
+    machine: &Machine,
+) -> Result<Measured> {
+    let mut m = measure_state(channels, chosen, facts, machine)?;
+    m.parts = machine.described.then(|| Parts::of(machine.gearbox));
+    Ok(m)
+}
+
+/// [`measure_record`] without the parts.
+fn measure_state(
     channels: &[(String, Vec<f64>)],
     chosen: &[usize],
     facts: &RecordFacts,
@@ -86,7 +101,7 @@ pub fn measure_record(
         return Ok(Measured {
             angle: Some(angle),
             state: Some(state),
-            note: None,
+            ..Default::default()
         });
     }
     if !machine.described {
@@ -102,7 +117,7 @@ pub fn measure_record(
             Ok((angle, state)) => Measured {
                 angle: Some(angle),
                 state: Some(state),
-                note: None,
+                ..Default::default()
             },
             Err(e) => Measured {
                 note: Some(format!("the shaft rate could not be measured: {e}")),
@@ -132,21 +147,14 @@ pub fn order_at(rec: &Record, machine: &Machine, m: &Measured) -> Option<OrderAn
 pub fn add_evidence(
     features: &mut RecordFeatures,
     rec: &Record,
-    machine: &Machine,
     m: &Measured,
     order: Option<&OrderAnalysis>,
 ) {
     features.state = m.state.clone();
-    let (Some(angle), true) = (&m.angle, machine.described) else {
+    let (Some(angle), Some(parts)) = (&m.angle, &m.parts) else {
         return;
     };
-    match evidence(
-        &rec.samples,
-        rec.sample_rate,
-        angle,
-        &Parts::of(machine.gearbox),
-        order,
-    ) {
+    match evidence(&rec.samples, rec.sample_rate, angle, parts, order) {
         Ok(ev) => features.evidence = ev,
         Err(e) => {
             if let Some(o) = features.indicators.as_object_mut() {
@@ -169,14 +177,15 @@ pub struct Judged {
 pub fn judge(
     baseline: &StateBaseline,
     features: &RecordFeatures,
-    machine: &Machine,
+    m: &Measured,
 ) -> Option<std::result::Result<Judged, String>> {
     let state = features.state.as_ref()?;
+    let parts = m.parts.as_ref()?;
     if features.evidence.is_empty() {
         return None;
     }
     Some(baseline.score(state, &features.evidence).map(|s| Judged {
-        findings: findings(&s, &Parts::of(machine.gearbox)),
+        findings: findings(&s, parts),
         novelty: novelty_of(&s, baseline),
         judgement: judgement_of(&s),
     }))

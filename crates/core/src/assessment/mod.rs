@@ -305,7 +305,7 @@ fn assess_channel(
     let judged = machine
         .state_baselines
         .get(&name)
-        .and_then(|b| condition::judge(b, &features, machine));
+        .and_then(|b| condition::judge(b, &features, measured));
     let (novelty, state, findings, uncovered) = match judged {
         Some(Ok(j)) => (Some(j.novelty), Some(j.judgement), j.findings, None),
         Some(Err(missing)) => (None, None, Vec::new(), Some(missing)),
@@ -425,7 +425,7 @@ fn channel_features(
             .and_then(|o| o.order.as_ref())
     });
     let mut features = record_features_with(rec, gb, hint, order)?;
-    condition::add_evidence(&mut features, rec, machine, measured, order);
+    condition::add_evidence(&mut features, rec, measured, order);
     Ok(features)
 }
 

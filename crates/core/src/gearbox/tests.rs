@@ -199,13 +199,15 @@ fn err(text: &str) -> GearboxError {
     parse(text).expect_err("must be refused")
 }
 
+/// One parallel stage with the given pinion and gear tables.
+fn par(p: &str, g: &str) -> String {
+    format!(
+        "{HEADER}input_shaft = \"in\"\n[[stage]]\nkind = \"parallel\"\npinion = {{ {p} }}\ngear = {{ {g} }}\n"
+    )
+}
+
 #[test]
-fn bad_descriptions_get_specific_errors() {
-    let par = |p: &str, g: &str| {
-        format!(
-            "{HEADER}input_shaft = \"in\"\n[[stage]]\nkind = \"parallel\"\npinion = {{ {p} }}\ngear = {{ {g} }}\n"
-        )
-    };
+fn bad_stages_get_specific_errors() {
     // zero and negative teeth
     assert!(matches!(
         err(&par(
@@ -310,6 +312,10 @@ fn bad_descriptions_get_specific_errors() {
         err(&t),
         GearboxError::MissingMember { member: "gear", .. }
     ));
+}
+
+#[test]
+fn bad_values_and_headers_get_specific_errors() {
     // values out of range
     let t = par(
         "shaft = \"in\", teeth = 20, face_width_mm = -5",
@@ -364,6 +370,43 @@ fn bad_descriptions_get_specific_errors() {
         "input_shaft = \"in\"\nwear_stages = [2]",
     );
     assert!(matches!(err(&t), GearboxError::StageIndex { .. }));
+}
+
+/// A bearing on a shaft no gear sits on, with only part of its geometry or only some of its
+/// orders, or with a ball wider than its pitch circle: each refused, naming the bearing. A
+/// complete one resolves to the textbook orders (n = 8, d/D = 7.94/33.5: BPFO = 4 (1 − d/D)).
+#[test]
+fn bearings_are_checked_and_resolve_to_their_defect_orders() {
+    let base = par("shaft = \"in\", teeth = 20", "shaft = \"o\", teeth = 40");
+    let with = |b: &str| format!("{base}[[bearing]]\nname = \"b1\"\n{b}");
+    for (b, says) in [
+        (
+            "shaft = \"x\"\nbpfo = 3.0\nbpfi = 5.0\nbsf = 2.0\nftf = 0.4\n",
+            "carries no gear",
+        ),
+        ("shaft = \"o\"\nrolling_elements = 8\n", "pitch_diameter_mm"),
+        ("shaft = \"o\"\nbpfo = 3.0\n", "all four"),
+        (
+            "shaft = \"o\"\nrolling_elements = 8\nball_diameter_mm = 40\npitch_diameter_mm = 33.5\n",
+            "ball diameter",
+        ),
+    ] {
+        let e = err(&with(b));
+        assert!(
+            matches!(&e, GearboxError::Bearing { name, .. } if name == "b1")
+                && e.to_string().contains(says),
+            "{b}: {e}"
+        );
+    }
+    let gb = parse(&with(
+        "shaft = \"o\"\nrolling_elements = 8\nball_diameter_mm = 7.94\npitch_diameter_mm = 33.5\n",
+    ))
+    .unwrap();
+    let o = gb.description.bearings[0].defect_orders().unwrap();
+    let r = 7.94 / 33.5;
+    assert!((o.bpfo - 4.0 * (1.0 - r)).abs() < 1e-12 && (o.bpfi - 4.0 * (1.0 + r)).abs() < 1e-12);
+    assert!((o.ftf - 0.5 * (1.0 - r)).abs() < 1e-12);
+    assert!((o.bsf - 33.5 / (2.0 * 7.94) * (1.0 - r * r)).abs() < 1e-12);
 }
 
 #[test]
