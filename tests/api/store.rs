@@ -234,7 +234,9 @@ async fn idempotency_answers_expire_records_stay(b: Backend) {
     st.close().await;
 }
 
-fn ingest(machine: &str, idem: Option<&str>, t: i64) -> Ingest {
+/// One accepted record of `machine` at time `t` (with `Idempotency-Key` `idem` of key `key`), as
+/// the record path writes it; a new machine is made for it.
+pub fn ingest(machine: &str, idem: Option<&str>, t: i64) -> Ingest {
     let (rid, did) = (new_id(), new_id());
     Ingest {
         record: NewRecord {
@@ -279,6 +281,7 @@ fn ingest(machine: &str, idem: Option<&str>, t: i64) -> Ingest {
             response: "{}".into(),
         }),
         event_extras: Default::default(),
+        registered_only: false,
     }
 }
 

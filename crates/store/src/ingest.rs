@@ -51,6 +51,11 @@ pub struct Ingest {
     /// service's: the deciding channel's `findings` and the record's `operating_state`); a
     /// member of the same name as a row's is not replaced.
     pub event_extras: serde_json::Map<String, serde_json::Value>,
+    /// Store the record only if its machine is registered (`registered_at` set by
+    /// `PUT /v1/machines/{id}`), else fail with [`StoreError::UnregisteredMachine`](crate::StoreError::UnregisteredMachine)
+    /// and store nothing; when false a record of an unknown machine creates it. Checked in
+    /// the transaction, so a machine deleted meanwhile is not brought back.
+    pub registered_only: bool,
 }
 
 /// The webhook events an ingest raises, given the machine's previous alert level:
@@ -107,7 +112,7 @@ pub trait IngestStore: Send + Sync {
 /// run the same text.
 macro_rules! ingest_sql {
     ($store:ident, $db:ty) => {
-        use super::webhooks::webhook_row;
+        use super::webhooks::queue_events;
         use super::$store;
         use sqlx::Row;
         use $crate::*;
@@ -115,27 +120,12 @@ macro_rules! ingest_sql {
         /// Every write of one accepted record, inside the caller's transaction.
         async fn ingest_in(tx: &mut sqlx::Transaction<'_, $db>, ing: &Ingest) -> StoreResult<()> {
             let (rec, d) = (&ing.record, &ing.diagnosis);
-            // A write first: SQLite then takes its write lock at once (waiting on the busy
-            // timeout) instead of failing to upgrade a read lock later. The same statement
-            // hands back the machine's alert level before this record (the no-op update
-            // returns the stored row; a new machine's is the column default): one round trip
-            // instead of an insert and a select, and on PostgreSQL the row stays locked
-            // until the commit, so a concurrent record cannot read the same previous level.
-            let prev: String = sqlx::query(
-                "INSERT INTO machines (id, created_at, updated_at) VALUES ($1, $2, $2) \
-                 ON CONFLICT (id) DO UPDATE SET updated_at = machines.updated_at \
-                 RETURNING alert_level",
-            )
-            .bind(&rec.machine_id)
-            .bind(rec.received_at)
-            .fetch_one(&mut **tx)
-            .await?
-            .try_get("alert_level")?;
+            let prev = lock_machine(tx, ing).await?;
             if let Some(i) = &ing.idempotency {
                 let r = sqlx::query(
                     "INSERT INTO idempotency_keys \
-                     (key_id, idem_key, request_hash, status, response, created_at) \
-                     VALUES ($1, $2, $3, $4, $5, $6)",
+                     (key_id, idem_key, request_hash, status, response, created_at, machine_id) \
+                     VALUES ($1, $2, $3, $4, $5, $6, $7)",
                 )
                 .bind(&i.key_id)
                 .bind(&i.idem_key)
@@ -143,6 +133,7 @@ macro_rules! ingest_sql {
                 .bind(i.status)
                 .bind(&i.response)
                 .bind(rec.received_at)
+                .bind(&rec.machine_id)
                 .execute(&mut **tx)
                 .await;
                 if let Err(e) = r {
@@ -213,32 +204,46 @@ macro_rules! ingest_sql {
             .bind(&d.alert_level)
             .execute(&mut **tx)
             .await?;
-            let hooks = sqlx::query("SELECT * FROM webhooks WHERE deleted_at IS NULL")
-                .fetch_all(&mut **tx)
+            let events = ingest_events(&prev, ing, &new_id());
+            queue_events(tx, &events, rec.received_at).await
+        }
+
+        /// The machine's alert level before this record, taking the machine's row lock. A
+        /// write first: SQLite then takes its write lock at once (waiting on the busy
+        /// timeout) instead of failing to upgrade a read lock later. The no-op update returns
+        /// the stored row; on PostgreSQL the row stays locked until the commit, so a
+        /// concurrent record cannot read the same previous level. With
+        /// [`Ingest::registered_only`] only a registered machine's row is touched, and a
+        /// machine that is not one refuses the record; otherwise a new machine's row is made
+        /// with the column defaults.
+        async fn lock_machine(
+            tx: &mut sqlx::Transaction<'_, $db>,
+            ing: &Ingest,
+        ) -> StoreResult<String> {
+            let rec = &ing.record;
+            if ing.registered_only {
+                let r = sqlx::query(
+                    "UPDATE machines SET updated_at = machines.updated_at \
+                     WHERE id = $1 AND registered_at IS NOT NULL RETURNING alert_level",
+                )
+                .bind(&rec.machine_id)
+                .fetch_optional(&mut **tx)
                 .await?;
-            let event_id = new_id();
-            let events = ingest_events(&prev, ing, &event_id);
-            for h in &hooks {
-                let h = webhook_row(h)?;
-                for (event, payload) in &events {
-                    if !h.events.iter().any(|e| e == event || e == "*") {
-                        continue;
-                    }
-                    sqlx::query(
-                        "INSERT INTO deliveries (id, webhook_id, event, payload, status, \
-                         attempts, next_attempt_at, created_at) \
-                         VALUES ($1, $2, $3, $4, 'pending', 0, $5, $5)",
-                    )
-                    .bind(new_id())
-                    .bind(&h.id)
-                    .bind(event)
-                    .bind(payload)
-                    .bind(rec.received_at)
-                    .execute(&mut **tx)
-                    .await?;
-                }
+                return match r {
+                    Some(r) => Ok(r.try_get("alert_level")?),
+                    None => Err(StoreError::UnregisteredMachine(rec.machine_id.clone())),
+                };
             }
-            Ok(())
+            Ok(sqlx::query(
+                "INSERT INTO machines (id, created_at, updated_at) VALUES ($1, $2, $2) \
+                 ON CONFLICT (id) DO UPDATE SET updated_at = machines.updated_at \
+                 RETURNING alert_level",
+            )
+            .bind(&rec.machine_id)
+            .bind(rec.received_at)
+            .fetch_one(&mut **tx)
+            .await?
+            .try_get("alert_level")?)
         }
 
         #[async_trait::async_trait]

@@ -1,8 +1,7 @@
 //! Storage of the service: one [`Store`] trait, one implementation per backend.
 //!
-//! * [`sqlite::SqliteStore`] — the default, a single file (`gearwear.db`), no set-up. WAL
-//!   journal with `synchronous = FULL`: a committed transaction survives a crash and a power
-//!   cut.
+//! * [`sqlite::SqliteStore`] — the default, a single file, no set-up. WAL journal with
+//!   `synchronous = FULL`: a committed transaction survives a crash and a power cut.
 //! * [`postgres::PgStore`] — chosen when the database URL starts with `postgres://` (or
 //!   `postgresql://`), so several service replicas can share one store.
 //!
@@ -18,6 +17,7 @@
 //!
 //! Times are unix milliseconds. A record is acknowledged only after [`IngestStore::ingest`]'s
 //! transaction — machine, record, diagnosis, webhook deliveries, idempotency entry — commits.
+//! [`MachineStore::delete_machine`] takes all of a machine's rows away in one transaction.
 
 use std::sync::Arc;
 
@@ -95,7 +95,9 @@ pub use diagnoses::{DiagnosisRow, DiagnosisStore, LEVELS, level_rank, novelty_js
 pub use gearboxes::{GearboxRow, GearboxStore, PutOutcome};
 pub use ingest::{IdemRow, Ingest, IngestStore, NewRecord, ingest_events};
 pub use keys::{KeyRow, KeyStore};
-pub use machines::{MachineConfig, MachineRow, MachineStore};
+pub use machines::{
+    MachineConfig, MachineDeletion, MachineRow, MachineStore, machine_deleted_event,
+};
 pub use retention::RetentionStore;
 pub use webhooks::{AttemptRow, DeliveryRow, Outcome, WebhookRow, WebhookStore};
 
@@ -114,6 +116,10 @@ pub enum StoreError {
     /// One error shared by every record of a failed group commit.
     #[error("{0}")]
     Shared(Arc<StoreError>),
+    /// A record for a machine that was not registered (`PUT /v1/machines/{id}`), written with
+    /// [`Ingest::registered_only`]: nothing of it is stored.
+    #[error("machine `{0}` is not registered")]
+    UnregisteredMachine(String),
 }
 
 impl StoreError {

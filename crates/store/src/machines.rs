@@ -1,4 +1,4 @@
-//! Machines: their configuration (`PUT /v1/machines/{id}`) and latest state.
+//! Machines: their configuration (`PUT /v1/machines/{id}`), latest state and deletion.
 
 use async_trait::async_trait;
 
@@ -23,6 +23,9 @@ pub struct MachineRow {
     pub tacho_channel: Option<String>,
     /// Tachometer pulses per input-shaft revolution (at least 1).
     pub tacho_ppr: i64,
+    /// When it was first configured (`PUT /v1/machines/{id}`); `None`: it exists only
+    /// because records were posted for it.
+    pub registered_at: Option<i64>,
 }
 
 /// What `PUT /v1/machines/{id}` sets.
@@ -37,13 +40,52 @@ pub struct MachineConfig {
     pub tacho_ppr: i64,
 }
 
+/// What [`MachineStore::delete_machine`] took away.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct MachineDeletion {
+    pub machine_id: String,
+    /// Records (with their raw samples and baseline marks).
+    pub records: u64,
+    pub diagnoses: u64,
+    /// Whether it had a calibration.
+    pub calibration: bool,
+    /// Stored `Idempotency-Key` answers about its records.
+    pub idempotency_answers: u64,
+    /// Its alert level before the deletion (`None`: it had only a calibration).
+    pub alert_level: Option<String>,
+}
+
+/// The payload of the `machine.deleted` webhook event: what was deleted, when.
+pub fn machine_deleted_event(d: &MachineDeletion, event_id: &str, now: i64) -> String {
+    serde_json::json!({
+        "event": "machine.deleted",
+        "event_id": event_id,
+        "machine_id": d.machine_id,
+        "deleted_at": crate::time::rfc3339(now),
+        "records": d.records,
+        "diagnoses": d.diagnoses,
+        "calibration": d.calibration,
+        "alert_level": d.alert_level,
+    })
+    .to_string()
+}
+
 /// Machines.
 #[async_trait]
 pub trait MachineStore: Send + Sync {
     async fn list_machines(&self) -> StoreResult<Vec<MachineRow>>;
     async fn get_machine(&self, id: &str) -> StoreResult<Option<MachineRow>>;
-    /// Create or update a machine's configuration; `true` when the machine is new.
+    /// Create or update a machine's configuration; `true` when the machine is new. Either
+    /// way the machine is registered from then on (`registered_at`, kept from the first
+    /// time).
     async fn put_machine(&self, m: &MachineConfig, now: i64) -> StoreResult<bool>;
+    /// Delete a machine and everything of it in one transaction — its diagnoses, records
+    /// (raw samples and baseline marks with them), calibration and the stored
+    /// `Idempotency-Key` answers about it — and queue a `machine.deleted` event for the
+    /// webhooks that subscribe to it. Deliveries already queued about the machine stay and
+    /// are still sent. `None` (nothing written) when there was no such machine (no row and no
+    /// calibration).
+    async fn delete_machine(&self, id: &str, now: i64) -> StoreResult<Option<MachineDeletion>>;
 }
 
 /// The SQL of [`MachineStore`] for one backend: `$store` is the store type, `$db` its
@@ -70,6 +112,7 @@ macro_rules! machines_sql {
                     .and_then(|c| serde_json::from_str(&c).ok()),
                 tacho_channel: r.try_get("tacho_channel")?,
                 tacho_ppr: r.try_get("tacho_ppr")?,
+                registered_at: r.try_get("registered_at")?,
             })
         }
 
@@ -98,8 +141,8 @@ macro_rules! machines_sql {
                 let mut tx = self.pool.begin().await?;
                 let ins = sqlx::query(
                     "INSERT INTO machines (id, created_at, updated_at, gearbox_id, \
-                     input_shaft_hz, channels, tacho_channel, tacho_ppr) \
-                     VALUES ($1, $2, $2, $3, $4, $5, $6, $7) ON CONFLICT (id) DO NOTHING",
+                     input_shaft_hz, channels, tacho_channel, tacho_ppr, registered_at) \
+                     VALUES ($1, $2, $2, $3, $4, $5, $6, $7, $2) ON CONFLICT (id) DO NOTHING",
                 )
                 .bind(&m.id)
                 .bind(now)
@@ -114,8 +157,8 @@ macro_rules! machines_sql {
                 if !created {
                     sqlx::query(
                         "UPDATE machines SET gearbox_id = $2, input_shaft_hz = $3, \
-                         channels = $4, updated_at = $5, tacho_channel = $6, tacho_ppr = $7 \
-                         WHERE id = $1",
+                         channels = $4, updated_at = $5, tacho_channel = $6, tacho_ppr = $7, \
+                         registered_at = COALESCE(registered_at, $5) WHERE id = $1",
                     )
                     .bind(&m.id)
                     .bind(&m.gearbox_id)
@@ -129,6 +172,70 @@ macro_rules! machines_sql {
                 }
                 tx.commit().await?;
                 Ok(created)
+            }
+
+            async fn delete_machine(
+                &self,
+                id: &str,
+                now: i64,
+            ) -> StoreResult<Option<MachineDeletion>> {
+                let mut tx = self.pool.begin().await?;
+                // A write first, on the machine's row: SQLite takes its write lock at once,
+                // and on PostgreSQL a record being stored for the machine (which locks the
+                // same row first) either commits before (its rows are deleted here) or waits
+                // and then finds no machine.
+                let alert_level: Option<String> = sqlx::query(
+                    "UPDATE machines SET updated_at = $2 WHERE id = $1 RETURNING alert_level",
+                )
+                .bind(id)
+                .bind(now)
+                .fetch_optional(&mut *tx)
+                .await?
+                .map(|r| r.try_get("alert_level"))
+                .transpose()?;
+                let deleted = |table_where: &'static str| {
+                    let q = sqlx::AssertSqlSafe(format!("DELETE FROM {table_where}"));
+                    sqlx::query(q).bind(id.to_string())
+                };
+                // Children before parents (diagnoses name records, both name the machine).
+                let diagnoses = deleted("diagnoses WHERE machine_id = $1")
+                    .execute(&mut *tx)
+                    .await?
+                    .rows_affected();
+                let records = deleted("records WHERE machine_id = $1")
+                    .execute(&mut *tx)
+                    .await?
+                    .rows_affected();
+                let idempotency_answers = deleted("idempotency_keys WHERE machine_id = $1")
+                    .execute(&mut *tx)
+                    .await?
+                    .rows_affected();
+                let calibration = deleted("calibrations WHERE machine_id = $1")
+                    .execute(&mut *tx)
+                    .await?
+                    .rows_affected()
+                    > 0;
+                deleted("machines WHERE id = $1").execute(&mut *tx).await?;
+                if alert_level.is_none() && !calibration {
+                    // Nothing was there: nothing to announce (the transaction wrote nothing).
+                    tx.rollback().await?;
+                    return Ok(None);
+                }
+                let d = MachineDeletion {
+                    machine_id: id.to_string(),
+                    records,
+                    diagnoses,
+                    calibration,
+                    idempotency_answers,
+                    alert_level,
+                };
+                let event = (
+                    "machine.deleted".to_string(),
+                    machine_deleted_event(&d, &new_id(), now),
+                );
+                super::webhooks::queue_events(&mut tx, &[event], now).await?;
+                tx.commit().await?;
+                Ok(Some(d))
             }
         }
     };

@@ -94,6 +94,40 @@ macro_rules! webhooks_sql {
             })
         }
 
+        /// Queue each `(event, payload)` for every live subscription that asked for it, inside
+        /// the caller's transaction (so an event exists exactly when what raised it is
+        /// committed); `now` is the deliveries' creation and first due time.
+        pub(crate) async fn queue_events(
+            tx: &mut sqlx::Transaction<'_, $db>,
+            events: &[(String, String)],
+            now: i64,
+        ) -> StoreResult<()> {
+            let hooks = sqlx::query("SELECT * FROM webhooks WHERE deleted_at IS NULL")
+                .fetch_all(&mut **tx)
+                .await?;
+            for h in &hooks {
+                let h = webhook_row(h)?;
+                for (event, payload) in events {
+                    if !h.events.iter().any(|e| e == event || e == "*") {
+                        continue;
+                    }
+                    sqlx::query(
+                        "INSERT INTO deliveries (id, webhook_id, event, payload, status, \
+                         attempts, next_attempt_at, created_at) \
+                         VALUES ($1, $2, $3, $4, 'pending', 0, $5, $5)",
+                    )
+                    .bind(new_id())
+                    .bind(&h.id)
+                    .bind(event)
+                    .bind(payload)
+                    .bind(now)
+                    .execute(&mut **tx)
+                    .await?;
+                }
+            }
+            Ok(())
+        }
+
         fn delivery_row(r: &<$db as sqlx::Database>::Row) -> StoreResult<DeliveryRow> {
             Ok(DeliveryRow {
                 id: r.try_get("id")?,
