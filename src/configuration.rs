@@ -1,5 +1,6 @@
 //! Settings of the service: one struct with documented defaults, filled from the command line
-//! (and the environment variables clap reads for it, e.g. `DATABASE_URL`).
+//! (and the environment variables clap reads for it, e.g. `GEARWEAR_ADDRESS`; the database is
+//! resolved by [`crate::database`]).
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -10,12 +11,18 @@ use std::time::Duration;
 pub struct Settings {
     /// Where to listen (default `127.0.0.1:8080`).
     pub address: SocketAddr,
-    /// `postgres://…` → PostgreSQL; anything else is a SQLite file (default `gearwear.db`).
+    /// `postgres://…` → PostgreSQL; anything else is a SQLite file. `serve` fills it with
+    /// [`crate::database::DatabaseArg::resolve`]; this struct's default, `gearwear.db` in the
+    /// current directory, is for tests and embedders that set it.
     pub database_url: String,
     /// The signature table (default: the committed one under `signatures/`).
     pub signatures: PathBuf,
     /// Serve the dashboard and the read endpoints without a key.
     pub open_dashboard: bool,
+    /// Take records only for machines registered with `PUT /v1/machines/{id}` (a record for
+    /// any other id is a 404 `unknown-machine` and stores nothing); off: a record for a new
+    /// id creates the machine.
+    pub require_registered_machines: bool,
     /// Logs as JSON lines instead of human-readable text.
     pub log_json: bool,
     pub limits: Limits,
@@ -67,6 +74,7 @@ impl Default for Settings {
             database_url: "gearwear.db".into(),
             signatures: default_signatures(),
             open_dashboard: false,
+            require_registered_machines: false,
             log_json: false,
             limits: Limits {
                 max_body_bytes: 16 << 20,

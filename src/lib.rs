@@ -8,7 +8,8 @@
 //! - [`gearwear_plot`] (re-exported as [`plot`]): figures.
 //! - [`cli`]: the subcommands.
 //! - [`service`]: the HTTP API, the dashboard and the webhooks; [`store`]: SQLite and
-//!   PostgreSQL behind one trait; [`keys`]: API keys; [`configuration`], [`telemetry`].
+//!   PostgreSQL behind one trait; [`keys`]: API keys; [`configuration`], [`database`] (where
+//!   the database is), [`telemetry`].
 
 // Numeric kernels index several arrays with one loop variable; iterator chains would hide the
 // equations. `!(x > 0.0)` is used on purpose: it is true for NaN, which must be refused too.
@@ -23,6 +24,7 @@ pub use gearwear_store::{self as store, time};
 
 pub mod cli;
 pub mod configuration;
+pub mod database;
 pub mod keys;
 pub mod service;
 pub mod telemetry;

@@ -7,6 +7,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 
 use super::common::load_gearbox;
+use crate::database::{Database, DatabaseArg};
 use crate::signature::line_set::gearbox_line_set;
 use crate::signature::precompute::default_grid;
 
@@ -28,14 +29,7 @@ pub enum GearboxCommand {
     /// running service precomputes its signature table in the background.
     Add(AddArgs),
     /// The gearboxes stored in the service's database, with their table status.
-    List(StoreArgs),
-}
-
-#[derive(Debug, Args)]
-pub struct StoreArgs {
-    /// The service's store (same as `serve --database-url`).
-    #[arg(long, env = "DATABASE_URL", default_value = "gearwear.db")]
-    pub database_url: String,
+    List(DatabaseArg),
 }
 
 #[derive(Debug, Args)]
@@ -47,7 +41,7 @@ pub struct AddArgs {
     #[arg(long)]
     pub id: Option<String>,
     #[command(flatten)]
-    pub store: StoreArgs,
+    pub store: DatabaseArg,
 }
 
 #[derive(Debug, Args)]
@@ -69,15 +63,11 @@ pub struct ShowArgs {
     #[arg(long)]
     pub id: Option<String>,
     #[command(flatten)]
-    pub store: StoreArgs,
+    pub store: DatabaseArg,
 }
 
-fn open_store(url: &str) -> Result<std::sync::Arc<dyn crate::store::Store>> {
-    crate::service::cli::runtime()?.block_on(async {
-        crate::store::connect(url)
-            .await
-            .map_err(|e| anyhow::anyhow!("opening the store {url}: {e}"))
-    })
+fn open_store(db: &Database) -> Result<std::sync::Arc<dyn crate::store::Store>> {
+    crate::service::cli::runtime()?.block_on(db.open())
 }
 
 /// `gearwear gearbox …`.
@@ -118,12 +108,10 @@ pub fn run(a: GearboxArgs) -> Result<()> {
                 bail!("`{id}` is the built-in paper rig; choose another --id");
             }
             let (row, _) = crate::service::gearboxes::gearbox_row(&id, &text, fmt, &origin)?;
-            let url = a.store.database_url;
+            let db = a.store.resolve()?;
             let rt = crate::service::cli::runtime()?;
             let outcome = rt.block_on(async {
-                let st = crate::store::connect(&url)
-                    .await
-                    .map_err(|e| anyhow::anyhow!("opening the store {url}: {e}"))?;
+                let st = db.open().await?;
                 let o = st.put_gearbox(&row).await?;
                 st.close().await;
                 anyhow::Ok(o)
@@ -134,8 +122,9 @@ pub fn run(a: GearboxArgs) -> Result<()> {
                 crate::store::PutOutcome::Unchanged => "unchanged (the same description)",
             };
             eprintln!(
-                "gearbox `{id}` {what}; a running `gearwear serve` on this store precomputes its \
-                 table (watch: gearwear gearbox show --id {id})"
+                "gearbox `{id}` {what} in {}; a running `gearwear serve` on this database \
+                 precomputes its table (watch: gearwear gearbox show --id {id})",
+                db.describe()
             );
             println!(
                 "{}",
@@ -143,7 +132,7 @@ pub fn run(a: GearboxArgs) -> Result<()> {
             );
         }
         GearboxCommand::List(a) => {
-            let st = open_store(&a.database_url)?;
+            let st = open_store(&a.resolve()?)?;
             let rows = crate::service::cli::runtime()?.block_on(st.list_gearboxes())?;
             let v: Vec<_> = rows
                 .iter()
@@ -153,11 +142,12 @@ pub fn run(a: GearboxArgs) -> Result<()> {
         }
         GearboxCommand::Show(s) if s.id.is_some() => {
             let id = s.id.unwrap_or_default();
-            let st = open_store(&s.store.database_url)?;
+            let db = s.store.resolve()?;
+            let st = open_store(&db)?;
             let Some(row) = crate::service::cli::runtime()?.block_on(st.get_gearbox(&id))? else {
                 bail!(
                     "no gearbox `{id}` in {}; add it with `gearwear gearbox add --gearbox FILE --id {id}`",
-                    s.store.database_url
+                    db.describe()
                 );
             };
             let d: crate::gearbox::GearboxDescription = serde_json::from_str(&row.description)?;

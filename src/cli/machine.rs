@@ -1,10 +1,11 @@
-//! `gearwear machine set`: a machine's configuration in the service's database (like
-//! `PUT /v1/machines/{id}`).
+//! `gearwear machine set|delete`: a machine's configuration in the service's database (like
+//! `PUT /v1/machines/{id}`, which also registers it), and its deletion with everything of it
+//! (like `DELETE /v1/machines/{id}`).
 
 use anyhow::{Result, bail};
 use clap::{Args, Subcommand};
 
-use super::gearbox::StoreArgs;
+use crate::database::DatabaseArg;
 use crate::service::gearboxes::BUILTIN_ID;
 use crate::store::{MachineConfig, now_ms};
 
@@ -16,8 +17,12 @@ pub struct MachineArgs {
 
 #[derive(Debug, Subcommand)]
 pub enum MachineCommand {
-    /// Point a machine at a stored gearbox, with its nominal input-shaft rate and channels.
+    /// Point a machine at a stored gearbox, with its nominal input-shaft rate and channels
+    /// (this registers it: `serve --require-registered-machines` takes its records).
     Set(SetArgs),
+    /// Delete a machine and everything of it: records, diagnoses, baseline, calibration
+    /// (webhooks subscribed to `machine.deleted` are told). There is no undo.
+    Delete(DeleteArgs),
 }
 
 #[derive(Debug, Args)]
@@ -41,70 +46,123 @@ pub struct SetArgs {
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub tacho_ppr: i64,
     #[command(flatten)]
-    pub store: StoreArgs,
+    pub store: DatabaseArg,
+}
+
+#[derive(Debug, Args)]
+pub struct DeleteArgs {
+    /// The machine's id.
+    pub id: String,
+    #[command(flatten)]
+    pub store: DatabaseArg,
 }
 
 /// `gearwear machine …`.
 pub fn run(a: MachineArgs) -> Result<()> {
     match a.command {
-        MachineCommand::Set(s) => {
-            if crate::service::http::check_machine_id(&s.id).is_err() {
-                bail!(
-                    "a machine id is 1 to 64 characters of letters, digits, `.`, `_` and `-`, got `{}`",
-                    s.id
-                );
-            }
-            if let Some(hz) = s.input_shaft_hz
-                && !(hz.is_finite() && hz > 0.0 && hz <= 1000.0)
-            {
-                bail!("--input-shaft-hz must be a rate in Hz above 0 and at most 1000, got {hz}");
-            }
-            if let Err(e) = crate::service::machines::check_tacho(
-                s.tacho_channel.as_deref(),
-                s.tacho_ppr,
-                s.channels.as_deref(),
-            ) {
-                bail!(
-                    "{}",
-                    e.replace("`tacho_channel`", "--tacho-channel")
-                        .replace("`tacho_ppr`", "--tacho-ppr")
-                        .replace("`channels`", "--channels")
-                );
-            }
-            let url = s.store.database_url.clone();
-            crate::service::cli::runtime()?.block_on(async move {
-                let st = crate::store::connect(&url)
-                    .await
-                    .map_err(|e| anyhow::anyhow!("opening the store {url}: {e}"))?;
-                if s.gearbox != BUILTIN_ID && st.get_gearbox(&s.gearbox).await?.is_none() {
-                    bail!(
-                        "no gearbox `{}` in {url}; add it first with `gearwear gearbox add --gearbox FILE --id {}`",
-                        s.gearbox,
-                        s.gearbox
-                    );
-                }
-                let created = st
-                    .put_machine(
-                        &MachineConfig {
-                            id: s.id.clone(),
-                            gearbox_id: (s.gearbox != BUILTIN_ID).then(|| s.gearbox.clone()),
-                            input_shaft_hz: s.input_shaft_hz,
-                            channels: s.channels.clone(),
-                            tacho_channel: s.tacho_channel.clone(),
-                            tacho_ppr: s.tacho_ppr,
-                        },
-                        now_ms(),
-                    )
-                    .await?;
-                st.close().await;
-                println!(
-                    "{}",
-                    serde_json::json!({"id": s.id, "gearbox": s.gearbox, "input_shaft_hz": s.input_shaft_hz,
-                                       "channels": s.channels, "tacho_channel": s.tacho_channel,
-                                       "tacho_ppr": s.tacho_ppr, "created": created})
-                );
-                Ok(())
-            })
-        }
+        MachineCommand::Set(s) => set(s),
+        MachineCommand::Delete(d) => delete(d),
     }
+}
+
+fn check_id(id: &str) -> Result<()> {
+    if crate::service::http::check_machine_id(id).is_err() {
+        bail!(
+            "a machine id is 1 to 64 characters of letters, digits, `.`, `_` and `-`, got `{id}`"
+        );
+    }
+    Ok(())
+}
+
+/// `gearwear machine delete ID`: one transaction, as `DELETE /v1/machines/{id}` (a running
+/// service's webhook worker sends the `machine.deleted` events it queues).
+fn delete(d: DeleteArgs) -> Result<()> {
+    check_id(&d.id)?;
+    let db = d.store.resolve()?;
+    crate::service::cli::runtime()?.block_on(async move {
+        let st = db.open().await?;
+        let gone = st.delete_machine(&d.id, now_ms()).await?;
+        st.close().await;
+        let Some(gone) = gone else {
+            bail!(
+                "no machine `{}` in {} (deleted already, or it never had a record, a \
+                 configuration or a calibration there)",
+                d.id,
+                db.describe()
+            );
+        };
+        eprintln!(
+            "deleted machine `{}` from {}: {} records, {} diagnoses{}",
+            d.id,
+            db.describe(),
+            gone.records,
+            gone.diagnoses,
+            if gone.calibration {
+                ", its calibration"
+            } else {
+                ""
+            }
+        );
+        println!(
+            "{}",
+            serde_json::json!({"id": d.id, "deleted": true, "records": gone.records,
+                               "diagnoses": gone.diagnoses, "calibration": gone.calibration})
+        );
+        Ok(())
+    })
+}
+
+/// `gearwear machine set ID …`.
+fn set(s: SetArgs) -> Result<()> {
+    check_id(&s.id)?;
+    if let Some(hz) = s.input_shaft_hz
+        && !(hz.is_finite() && hz > 0.0 && hz <= 1000.0)
+    {
+        bail!("--input-shaft-hz must be a rate in Hz above 0 and at most 1000, got {hz}");
+    }
+    if let Err(e) = crate::service::machines::check_tacho(
+        s.tacho_channel.as_deref(),
+        s.tacho_ppr,
+        s.channels.as_deref(),
+    ) {
+        bail!(
+            "{}",
+            e.replace("`tacho_channel`", "--tacho-channel")
+                .replace("`tacho_ppr`", "--tacho-ppr")
+                .replace("`channels`", "--channels")
+        );
+    }
+    let db = s.store.resolve()?;
+    crate::service::cli::runtime()?.block_on(async move {
+        let st = db.open().await?;
+        if s.gearbox != BUILTIN_ID && st.get_gearbox(&s.gearbox).await?.is_none() {
+            bail!(
+                "no gearbox `{}` in {}; add it first with `gearwear gearbox add --gearbox FILE --id {}`",
+                s.gearbox,
+                db.describe(),
+                s.gearbox
+            );
+        }
+        let created = st
+            .put_machine(
+                &MachineConfig {
+                    id: s.id.clone(),
+                    gearbox_id: (s.gearbox != BUILTIN_ID).then(|| s.gearbox.clone()),
+                    input_shaft_hz: s.input_shaft_hz,
+                    channels: s.channels.clone(),
+                    tacho_channel: s.tacho_channel.clone(),
+                    tacho_ppr: s.tacho_ppr,
+                },
+                now_ms(),
+            )
+            .await?;
+        st.close().await;
+        println!(
+            "{}",
+            serde_json::json!({"id": s.id, "gearbox": s.gearbox, "input_shaft_hz": s.input_shaft_hz,
+                               "channels": s.channels, "tacho_channel": s.tacho_channel,
+                               "tacho_ppr": s.tacho_ppr, "created": created})
+        );
+        Ok(())
+    })
 }

@@ -11,6 +11,7 @@ use clap::{Args, Subcommand};
 
 use super::{AppState, check_exposure, serve};
 use crate::configuration::{Settings, Thresholds};
+use crate::database::DatabaseArg;
 use crate::keys::{self, Scope};
 use crate::store::{self, KeyRow, now_ms};
 
@@ -20,9 +21,8 @@ pub struct ServeArgs {
     /// Address to listen on. A non-loopback address needs at least one API key.
     #[arg(long, default_value = "127.0.0.1:8080", env = "GEARWEAR_ADDRESS")]
     pub address: SocketAddr,
-    /// `postgres://user@host:port/db` for PostgreSQL, else a SQLite file.
-    #[arg(long, env = "DATABASE_URL", default_value = "gearwear.db")]
-    pub database_url: String,
+    #[command(flatten)]
+    pub database: DatabaseArg,
     /// Signature table (default: the committed `signatures/model_a_accel.json`).
     #[arg(long, env = "GEARWEAR_SIGNATURES")]
     pub signatures: Option<PathBuf>,
@@ -38,6 +38,11 @@ pub struct ServeArgs {
         env = "GEARWEAR_DASHBOARD_WITHOUT_KEY"
     )]
     pub open_dashboard: bool,
+    /// Take records only for machines registered with PUT /v1/machines/{id} (or `gearwear
+    /// machine set`): a record for any other machine id is refused (404 unknown-machine) and
+    /// nothing is stored. Without it, a record for a new id creates the machine.
+    #[arg(long, env = "GEARWEAR_REQUIRE_REGISTERED_MACHINES")]
+    pub require_registered_machines: bool,
     /// Log JSON lines.
     #[arg(long, env = "GEARWEAR_LOG_JSON")]
     pub log_json: bool,
@@ -72,11 +77,13 @@ pub struct ServeArgs {
 }
 
 impl ServeArgs {
+    /// The settings, with the database resolved (see [`crate::database`]).
     pub fn settings(&self) -> Result<Settings> {
         let mut s = Settings {
             address: self.address,
-            database_url: self.database_url.clone(),
+            database_url: self.database.resolve()?.url,
             open_dashboard: self.open_dashboard,
+            require_registered_machines: self.require_registered_machines,
             log_json: self.log_json,
             ..Settings::default()
         };
@@ -121,14 +128,9 @@ impl ServeArgs {
 pub struct KeysArgs {
     #[command(subcommand)]
     pub command: KeysCommand,
-    /// Store holding the keys (same as `serve --database-url`).
-    #[arg(
-        long,
-        env = "DATABASE_URL",
-        default_value = "gearwear.db",
-        global = true
-    )]
-    pub database_url: String,
+    /// The database holding the keys: the one `serve` uses (the same rule finds it).
+    #[command(flatten)]
+    pub database: DatabaseArg,
 }
 
 #[derive(Debug, Subcommand, Clone)]
@@ -176,10 +178,9 @@ pub async fn create_key(
 }
 
 pub fn keys_cmd(a: KeysArgs) -> Result<()> {
+    let db = a.database.resolve()?;
     runtime()?.block_on(async move {
-        let store = store::connect(&a.database_url)
-            .await
-            .with_context(|| format!("opening the store {}", redact(&a.database_url)))?;
+        let store = db.open().await?;
         match a.command {
             KeysCommand::Create { scope, label } => {
                 let scopes = Scope::parse_list(&scope).map_err(|w| {
@@ -194,7 +195,7 @@ pub fn keys_cmd(a: KeysArgs) -> Result<()> {
                      database will not know it) — this is the only time it is shown:",
                     row.id,
                     Scope::join(&row.scopes),
-                    redact(&a.database_url)
+                    db.describe()
                 );
                 println!("{token}");
             }
@@ -226,28 +227,17 @@ pub fn keys_cmd(a: KeysArgs) -> Result<()> {
     })
 }
 
-/// A database URL without its password, for messages.
-pub fn redact(url: &str) -> String {
-    match (url.find("://"), url.rfind('@')) {
-        (Some(s), Some(at)) if at > s => {
-            let creds = &url[s + 3..at];
-            match creds.split_once(':') {
-                Some((user, _)) => format!("{}{user}:***{}", &url[..s + 3], &url[at..]),
-                None => url.to_string(),
-            }
-        }
-        _ => url.to_string(),
-    }
-}
+pub use crate::database::redact;
 
 pub fn serve_cmd(a: ServeArgs) -> Result<()> {
     let settings = a.settings()?;
     let a_allow_stale = a.allow_stale_table;
     crate::telemetry::init(settings.log_json);
     runtime()?.block_on(async move {
+        let database = crate::database::describe(&settings.database_url);
         let store = store::connect(&settings.database_url)
             .await
-            .with_context(|| format!("opening the store {}", redact(&settings.database_url)))?;
+            .with_context(|| format!("opening the database {database}"))?;
         check_exposure(&settings.address, store.active_key_count().await?)
             .map_err(anyhow::Error::msg)?;
         let diagnoser = super::signatures::load(&settings.signatures, a_allow_stale)
@@ -256,8 +246,7 @@ pub fn serve_cmd(a: ServeArgs) -> Result<()> {
             .await
             .with_context(|| format!("binding {}", settings.address))?;
         let addr = listener.local_addr()?;
-        let database = redact(&settings.database_url);
-        tracing::info!(%addr, store = store.kind(), %database, dashboard_without_key = settings.open_dashboard, "gearwear serving; dashboard at http://{addr}/; API keys live in {database}");
+        tracing::info!(%addr, store = store.kind(), %database, dashboard_without_key = settings.open_dashboard, require_registered_machines = settings.require_registered_machines, "gearwear serving; dashboard at http://{addr}/; API keys and machines live in {database}");
         let state = AppState::new(settings, store.clone(), Arc::new(diagnoser));
         serve(state, listener, shutdown_signal()).await?;
         store.close().await;
@@ -287,16 +276,4 @@ pub async fn shutdown_signal() {
         _ = term => {}
     }
     tracing::info!("shutdown signal: finishing in-flight requests");
-}
-
-#[cfg(test)]
-mod tests {
-    #[test]
-    fn passwords_are_redacted() {
-        assert_eq!(
-            super::redact("postgres://u:secret@h:5432/db"),
-            "postgres://u:***@h:5432/db"
-        );
-        assert_eq!(super::redact("gearwear.db"), "gearwear.db");
-    }
 }

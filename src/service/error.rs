@@ -123,6 +123,9 @@ impl ApiError {
 
 impl From<StoreError> for ApiError {
     fn from(e: StoreError) -> Self {
+        if let StoreError::UnregisteredMachine(id) = &e {
+            return unregistered_machine(id);
+        }
         if e.is_unavailable() {
             tracing::warn!(error = %e, "store unavailable");
             ApiError::new(
@@ -138,6 +141,21 @@ impl From<StoreError> for ApiError {
             ApiError::internal("a database error occurred; it has been logged")
         }
     }
+}
+
+/// 404 `unknown-machine` for a record refused by `--require-registered-machines`: the
+/// machine was not registered with `PUT /v1/machines/{id}` (nothing was stored).
+pub fn unregistered_machine(id: &str) -> ApiError {
+    ApiError::not_found(
+        "unknown-machine",
+        format!(
+            "machine `{id}` is not registered, and this service takes records only for \
+             registered machines (--require-registered-machines): register it with \
+             PUT /v1/machines/{id} (or `gearwear machine set {id}`), then send the record \
+             again — nothing was stored; check the id for a typo"
+        ),
+    )
+    .with("machine_id", id)
 }
 
 impl IntoResponse for ApiError {

@@ -29,6 +29,7 @@ pub mod error;
 pub mod gearboxes;
 pub mod health;
 pub mod http;
+pub mod lifecycle;
 pub mod machines;
 pub mod metrics;
 pub mod read;
@@ -109,7 +110,9 @@ pub fn router(state: AppState) -> Router {
         .route("/v1/machines", get(read::list_machines))
         .route(
             "/v1/machines/{machine_id}",
-            get(read::get_machine).put(machines::put),
+            get(read::get_machine)
+                .put(machines::put)
+                .delete(lifecycle::delete),
         )
         .route(
             "/v1/machines/{machine_id}/baseline",
@@ -176,6 +179,7 @@ pub const ROUTES: &[(&str, &str)] = &[
     ("GET", "/v1/machines"),
     ("GET", "/v1/machines/{machine_id}"),
     ("PUT", "/v1/machines/{machine_id}"),
+    ("DELETE", "/v1/machines/{machine_id}"),
     ("GET", "/v1/machines/{machine_id}/baseline"),
     ("POST", "/v1/machines/{machine_id}/baseline"),
     ("DELETE", "/v1/machines/{machine_id}/baseline"),

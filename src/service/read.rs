@@ -26,6 +26,7 @@ fn machine_summary(m: &MachineRow) -> Value {
         "updated_at": rfc3339(m.updated_at),
         "last_diagnosis_id": m.last_diagnosis_id,
         "gearbox": m.gearbox_id.clone().unwrap_or_else(|| BUILTIN_ID.to_string()),
+        "registered_at": m.registered_at.map(rfc3339),
     })
 }
 

@@ -89,6 +89,7 @@ async fn ingest(
         return Ok(r);
     }
     let machine = app.store.get_machine(machine_id).await?;
+    super::lifecycle::check_registered(app, machine_id, machine.as_ref())?;
     clock.skip();
     let pulses = tacho_name(machine.as_ref());
     let dec = decode(format, &q, &bytes, limits, Some(pulses))?;
@@ -132,6 +133,7 @@ async fn ingest(
         diagnosis: diagnosis_row(&assessment, &body, spectrum.as_ref(), &ids, machine_id),
         idempotency: idem.row(&response_text),
         event_extras: event_extras(&body),
+        registered_only: app.settings.require_registered_machines,
     };
     clock.lap("assemble");
     if let Some(r) = store(app, ing, &idem).await? {

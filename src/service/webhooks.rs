@@ -28,8 +28,13 @@ use crate::keys::{self, Scope};
 use crate::store::{AttemptRow, DeliveryRow, Outcome, WebhookRow, new_id, now_ms};
 use crate::time::rfc3339;
 
-/// Events a subscription may ask for.
-pub const EVENTS: [&str; 2] = ["diagnosis.created", "wear.threshold_crossed"];
+/// Events a subscription may ask for: a record's diagnosis was stored, a machine's alert level
+/// rose to warning or alarm, a machine was deleted (`DELETE /v1/machines/{id}`).
+pub const EVENTS: [&str; 3] = [
+    "diagnosis.created",
+    "wear.threshold_crossed",
+    "machine.deleted",
+];
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]

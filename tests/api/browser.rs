@@ -1,8 +1,8 @@
 //! The dashboard end to end in a real headless Chromium (Debian `chromium` +
 //! `chromium-driver`), driven over the W3C WebDriver protocol with plain HTTP: load the page,
-//! POST a record, see the machine, its wear estimate and the marked spectrum appear; a fleet in
-//! every alert state sorted by severity, a machine opened from the URL, the wear and novelty
-//! charts on a time axis; the read-key prompt.
+//! POST a record, see the machine, its wear estimate and the marked spectrum appear (and go
+//! when the machine is deleted); a fleet in every alert state sorted by severity, a machine
+//! opened from the URL, the wear and novelty charts on a time axis; the read-key prompt.
 //!
 //! Skips (with a message) only when chromium/chromedriver are absent and `CI` is not set.
 
@@ -243,6 +243,24 @@ async fn dashboard_updates_when_a_record_arrives() {
     let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("dashboard.png");
     std::fs::write(&out, png).unwrap();
     eprintln!("dashboard screenshot: {}", out.display());
+
+    // Deleted (DELETE /v1/machines/{id}): the machine leaves the list — the last one too — and
+    // the page left open on it says it is not there, without a reload.
+    let r = app
+        .client
+        .delete(app.url("/v1/machines/gearbox-1"))
+        .bearer_auth(&app.admin_key)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 204);
+    d.wait_for(
+        "the deleted machine gone from the list and from the page",
+        "return document.querySelectorAll('#machines li[data-id]').length === 0 && \
+         document.getElementById('machine').hidden && \
+         document.getElementById('placeholder').textContent.includes('gearbox-1')",
+    )
+    .await;
     d.cmd(reqwest::Method::DELETE, "", None).await;
     let _ = std::fs::remove_dir_all(&profile);
 }

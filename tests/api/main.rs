@@ -11,6 +11,7 @@ mod calibration;
 mod cli;
 mod faults;
 mod gearboxes;
+mod lifecycle;
 mod openapi;
 mod operating_state;
 mod security;

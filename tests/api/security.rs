@@ -85,6 +85,11 @@ const TABLE: &[(&str, &str, Need)] = &[
     ),
     ("PUT", "/v1/machines/{machine_id}", Need::Key(Scope::Admin)),
     (
+        "DELETE",
+        "/v1/machines/{machine_id}",
+        Need::Key(Scope::Admin),
+    ),
+    (
         "GET",
         "/v1/machines/{machine_id}/baseline",
         Need::Key(Scope::Read),
@@ -483,6 +488,18 @@ async fn every_route_needs_a_key_of_its_scope(b: Backend) {
                     .unwrap()
                     .to_string();
                 format!("/v1/webhooks/{id}")
+            } else if *template == "/v1/machines/{machine_id}" && *method == "DELETE" {
+                // Delete a machine of its own, not the fixture's.
+                let r = app
+                    .client
+                    .put(app.url("/v1/machines/delete-me"))
+                    .bearer_auth(&app.admin_key)
+                    .json(&json!({"gearbox": "wang2019"}))
+                    .send()
+                    .await
+                    .unwrap();
+                assert!(r.status().is_success(), "{}", r.status());
+                "/v1/machines/delete-me".to_string()
             } else {
                 fx.path(template)
             };

@@ -78,7 +78,7 @@ pub async fn create_hook(app: &TestApp, url: &str) -> Value {
     json(&body)
 }
 
-async fn wait_for<F: Fn() -> bool>(what: &str, f: F) {
+pub async fn wait_for<F: Fn() -> bool>(what: &str, f: F) {
     for _ in 0..200 {
         if f() {
             return;

@@ -134,9 +134,14 @@ function renderMachines(list, gearboxes) {
   const key = JSON.stringify([machines, gearboxes, selected]);
   if (key === fleetDrawn) return;
   fleetDrawn = key;
-  if (!machines.length) return;
-  const gb = new Map((gearboxes || []).map((g) => [g.id, g]));
+  // Redrawn from the answer every time, also when it is empty: a deleted machine leaves the
+  // list (the last one too).
   ul.innerHTML = "";
+  if (!machines.length) {
+    h("li", { class: "muted" }, ul, "no machine has sent a record yet");
+    return;
+  }
+  const gb = new Map((gearboxes || []).map((g) => [g.id, g]));
   for (const m of machines) {
     const lv = level(m.alert_level);
     const li = h("li", { class: "level-" + lv + (m.id === selected ? " selected" : "") }, ul);
