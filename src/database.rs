@@ -175,7 +175,7 @@ pub fn redact(url: &str) -> String {
 mod tests {
     use super::*;
 
-    fn env_of(vars: &[(&str, &str)]) -> impl Fn(&str) -> Option<String> + '_ {
+    fn env_of<'a>(vars: &'a [(&'a str, &'a str)]) -> impl Fn(&str) -> Option<String> + 'a {
         move |k| {
             vars.iter()
                 .find(|(n, _)| *n == k)
@@ -195,7 +195,9 @@ mod tests {
             ("GEARWEAR_DATABASE_URL", "postgres://g@h/gw"),
             ("DATABASE_URL", "postgres://d@h/db"),
         ];
-        let r = |flag, vars| resolve(flag, env_of(vars), default).unwrap();
+        let r = |flag: Option<&str>, vars: &[(&str, &str)]| {
+            resolve(flag, env_of(vars), default).unwrap()
+        };
         assert_eq!(
             r(Some("flag.db"), &both),
             Database {
