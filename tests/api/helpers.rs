@@ -129,6 +129,44 @@ impl TestDb {
     }
 }
 
+impl TestDb {
+    /// Migrate this fresh database only up to migration `version` (as an older release left
+    /// it) and run `rows` (SQL statements) in it; the store's `connect` later runs the rest.
+    pub async fn migrated_to(&self, version: i64, rows: &[&str]) {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(match self.backend {
+            Backend::Sqlite => "migrations/sqlite",
+            Backend::Postgres => "migrations/postgres",
+        });
+        let before = sqlx::migrate::Migrator::new(dir).await.unwrap();
+        match self.backend {
+            Backend::Sqlite => {
+                let opts = <sqlx::sqlite::SqliteConnectOptions as std::str::FromStr>::from_str(
+                    "sqlite://",
+                )
+                .unwrap()
+                .filename(&self.url)
+                .create_if_missing(true);
+                let pool = sqlx::SqlitePool::connect_with(opts).await.unwrap();
+                before.run_to(version, &pool).await.unwrap();
+                for q in rows {
+                    let q = sqlx::AssertSqlSafe(q.to_string());
+                    sqlx::query(q).execute(&pool).await.unwrap();
+                }
+                pool.close().await;
+            }
+            Backend::Postgres => {
+                let pool = sqlx::PgPool::connect(&self.url).await.unwrap();
+                before.run_to(version, &pool).await.unwrap();
+                for q in rows {
+                    let q = sqlx::AssertSqlSafe(q.to_string());
+                    sqlx::query(q).execute(&pool).await.unwrap();
+                }
+                pool.close().await;
+            }
+        }
+    }
+}
+
 impl Drop for TestDb {
     fn drop(&mut self) {
         if let Some(dir) = &self.dir {

@@ -378,11 +378,6 @@ async fn a_database_from_before_the_tachometer_keeps_working(b: Backend) {
     let Some(db) = TestDb::new(b).await else {
         return;
     };
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(match b {
-        Backend::Sqlite => "migrations/sqlite",
-        Backend::Postgres => "migrations/postgres",
-    });
-    let before = sqlx::migrate::Migrator::new(dir).await.unwrap();
     let rows = [
         "INSERT INTO machines (id, created_at, updated_at, gearbox_id, input_shaft_hz) \
          VALUES ('old', 1, 1, NULL, 40.0)",
@@ -395,29 +390,7 @@ async fn a_database_from_before_the_tachometer_keeps_working(b: Backend) {
          ea_upper, alert_level, motion_state, body, spectrum, has_wear) \
          VALUES ('worn', 'r1', 'old', 2, 0.5, 0.4, 0.6, 'ok', 'period-1', '{}', 'null', 1)",
     ];
-    match b {
-        Backend::Sqlite => {
-            let opts =
-                <sqlx::sqlite::SqliteConnectOptions as std::str::FromStr>::from_str("sqlite://")
-                    .unwrap()
-                    .filename(&db.url)
-                    .create_if_missing(true);
-            let pool = sqlx::SqlitePool::connect_with(opts).await.unwrap();
-            before.run_to(3, &pool).await.unwrap();
-            for q in rows {
-                sqlx::query(q).execute(&pool).await.unwrap();
-            }
-            pool.close().await;
-        }
-        Backend::Postgres => {
-            let pool = sqlx::PgPool::connect(&db.url).await.unwrap();
-            before.run_to(3, &pool).await.unwrap();
-            for q in rows {
-                sqlx::query(q).execute(&pool).await.unwrap();
-            }
-            pool.close().await;
-        }
-    }
+    db.migrated_to(3, &rows).await;
     let st = store::connect(&db.url).await.unwrap();
     let m = st.get_machine("old").await.unwrap().unwrap();
     assert_eq!((m.tacho_channel, m.tacho_ppr), (None, 1));
