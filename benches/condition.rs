@@ -102,6 +102,7 @@ fn main() {
         baseline_counts: &empty_c,
         calibration: None,
         thresholds: Thresholds::default(),
+        units: Default::default(),
     };
     let t0 = Instant::now();
     let mut by_channel: BTreeMap<String, Vec<RecordFeatures>> = BTreeMap::new();

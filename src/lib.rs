@@ -4,7 +4,7 @@
 //!
 //! - [`gearwear_core`] (re-exported here module by module, so `gearwear::diagnosis` and
 //!   `gearwear_core::diagnosis` are the same thing): records, signal processing, models,
-//!   solvers, gearboxes, signature tables, diagnosis, novelty, the closed loop.
+//!   solvers, gearboxes, signature tables, diagnosis, novelty, the closed loop, units.
 //! - [`gearwear_plot`] (re-exported as [`plot`]): figures.
 //! - [`cli`]: the subcommands.
 //! - [`service`]: the HTTP API, the dashboard and the webhooks; [`store`]: SQLite and
@@ -17,7 +17,7 @@
 
 pub use gearwear_core::{
     Error, Result, analysis, assessment, closed_loop, condition, diagnosis, error, gearbox, model,
-    novelty, record, signal, signature, solver,
+    novelty, record, signal, signature, solver, units,
 };
 pub use gearwear_plot as plot;
 pub use gearwear_store::{self as store, time};

@@ -124,6 +124,7 @@ fn machine<'a>(gb: &'a Gearbox, diagnoser: Option<&'a TableDiagnoser>) -> Machin
         baseline_counts: EMPTY_C.get_or_init(BTreeMap::new),
         calibration: None,
         thresholds: Thresholds::default(),
+        units: Default::default(),
     }
 }
 

@@ -11,6 +11,7 @@ use super::baseline::{self, BaselineFile, Loaded};
 use super::common::{
     RigArgs, default_table_for, load_gearbox, load_table, parse_range, progress_bar,
 };
+use super::units::UnitArgs;
 use crate::analysis::bifurcation::grid;
 use crate::assessment::{
     GearboxRef, Machine, MachineCalibration, RecordFacts, TableDiagnoser, TachoChannel, Thresholds,
@@ -157,6 +158,10 @@ pub struct DiagnoseArgs {
     /// Wear degree (ea) at which the alert level turns `alarm` (as `serve --alarm-ea`).
     #[arg(long, default_value_t = Thresholds::default().alarm)]
     pub alarm_ea: f64,
+    /// The channels' physical units and the machine's ISO 20816-3 class (as a machine's
+    /// `channel_units` and `iso_20816`).
+    #[command(flatten)]
+    pub units: UnitArgs,
 }
 
 /// `gearwear precompute`.
@@ -263,6 +268,8 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
     if !(a.warning_ea < a.alarm_ea) {
         bail!("--warning-ea must be below --alarm-ea");
     }
+    // A unit that cannot be converted fails before anything is read.
+    a.units.check(None, None)?;
     let opts = ReadOptions {
         format: a.format.map(|f| match f {
             FormatArg::Csv => Format::Csv,
@@ -303,6 +310,7 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
             warning: a.warning_ea,
             alarm: a.alarm_ea,
         },
+        units: Default::default(),
     };
     // Baseline first: a wrong baseline file should fail before the diagnosis runs.
     let files = baseline_files(&a, &load)?;
@@ -320,6 +328,14 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
     machine.state_baselines = &states;
     machine.baseline_counts = &counts;
     let mut rec = load_record(&a.input, &a, &opts)?;
+    let names: Vec<String> = rec
+        .chosen
+        .iter()
+        .map(|&i| rec.channels[i].0.clone())
+        .collect();
+    machine.units = a
+        .units
+        .machine_units(&names, rec.tacho.as_ref().map(|t| t.name.as_str()))?;
     let facts = facts_of(&rec, a.shaft_hz, load, false);
     let assessment = assess(
         &mut rec.channels,

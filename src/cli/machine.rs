@@ -5,6 +5,7 @@
 use anyhow::{Result, bail};
 use clap::{Args, Subcommand};
 
+use super::units::UnitArgs;
 use crate::database::DatabaseArg;
 use crate::service::gearboxes::BUILTIN_ID;
 use crate::store::{MachineConfig, now_ms};
@@ -17,8 +18,9 @@ pub struct MachineArgs {
 
 #[derive(Debug, Subcommand)]
 pub enum MachineCommand {
-    /// Point a machine at a stored gearbox, with its nominal input-shaft rate and channels
-    /// (this registers it: `serve --require-registered-machines` takes its records).
+    /// Point a machine at a stored gearbox, with its nominal input-shaft rate, channels,
+    /// tachometer, the channels' units and its ISO 20816-3 class (this registers it:
+    /// `serve --require-registered-machines` takes its records).
     Set(SetArgs),
     /// Delete a machine and everything of it: records, diagnoses, baseline, calibration
     /// (webhooks subscribed to `machine.deleted` are told). There is no undo.
@@ -45,6 +47,10 @@ pub struct SetArgs {
     /// Tachometer pulses per input-shaft revolution.
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub tacho_ppr: i64,
+    /// What the channels measure and the machine's ISO 20816-3 class (`channel_units`,
+    /// `iso_20816`).
+    #[command(flatten)]
+    pub units: UnitArgs,
     #[command(flatten)]
     pub store: DatabaseArg,
 }
@@ -132,6 +138,9 @@ fn set(s: SetArgs) -> Result<()> {
                 .replace("`channels`", "--channels")
         );
     }
+    let (channel_units, iso) = s
+        .units
+        .check(s.channels.as_deref(), s.tacho_channel.as_deref())?;
     let db = s.store.resolve()?;
     crate::service::cli::runtime()?.block_on(async move {
         let st = db.open().await?;
@@ -152,16 +161,22 @@ fn set(s: SetArgs) -> Result<()> {
                     channels: s.channels.clone(),
                     tacho_channel: s.tacho_channel.clone(),
                     tacho_ppr: s.tacho_ppr,
+                    channel_units: channel_units.clone(),
+                    iso_group: iso.map(|c| i64::from(c.group)),
+                    iso_support: iso.map(|c| c.support.as_str().to_string()),
                 },
                 now_ms(),
             )
             .await?;
         st.close().await;
+        let units: Option<serde_json::Value> =
+            channel_units.as_deref().and_then(|t| serde_json::from_str(t).ok());
         println!(
             "{}",
             serde_json::json!({"id": s.id, "gearbox": s.gearbox, "input_shaft_hz": s.input_shaft_hz,
                                "channels": s.channels, "tacho_channel": s.tacho_channel,
-                               "tacho_ppr": s.tacho_ppr, "created": created})
+                               "tacho_ppr": s.tacho_ppr, "channel_units": units,
+                               "iso_20816": iso, "created": created})
         );
         Ok(())
     })

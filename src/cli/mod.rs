@@ -21,6 +21,7 @@ pub mod model;
 pub mod model_b;
 pub mod simulate;
 pub mod synth;
+pub mod units;
 
 pub use common::{RigArgs, SolveArgs, parse_range};
 

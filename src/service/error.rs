@@ -245,6 +245,7 @@ pub fn problem_from_error(e: &crate::Error) -> ApiError {
                 .with("parameter", name.as_str())
         }
         E::Signal(m) => un("unusable-record", "Unusable record", m.clone()),
+        E::Unit(u) => un("invalid-unit", "Unit cannot be used", u.to_string()),
         other => {
             tracing::error!(error = %other, "diagnosis failed");
             ApiError::internal(format!("the diagnosis failed: {other}"))

@@ -1,11 +1,13 @@
 //! A machine's configuration and its baseline.
 //!
 //! * `PUT /v1/machines/{id}` (admin): `{"gearbox": "<id>", "input_shaft_hz"?: number,
-//!   "channels"?: [names], "tacho_channel"?: name, "tacho_ppr"?: integer}` — which gearbox
-//!   the machine's records are diagnosed with (default the built-in paper rig), its nominal
-//!   input-shaft rate (a hint for finding the mesh line; the rate itself is measured in each
-//!   record), the channels to diagnose, and the channel of its tachometer with its pulses per
-//!   input-shaft revolution (the record's speed is then counted from the pulses).
+//!   "channels"?: [names], "tacho_channel"?: name, "tacho_ppr"?: integer, "channel_units"?:
+//!   {name: unit}, "iso_20816"?: {"group", "support"}}` — which gearbox the machine's records
+//!   are diagnosed with (default the built-in paper rig), its nominal input-shaft rate (a hint
+//!   for finding the mesh line; the rate itself is measured in each record), the channels to
+//!   diagnose, the channel of its tachometer with its pulses per input-shaft revolution (the
+//!   record's speed is then counted from the pulses), and what its channels measure with its
+//!   ISO 20816-3 class ([`super::units`]).
 //! * `GET/POST/DELETE /v1/machines/{id}/baseline`: the records marked healthy. A record is
 //!   marked when posted (`…/records?baseline=true`) or afterwards (POST `{"record_ids": […]}`,
 //!   admin); DELETE clears the baseline, `DELETE …/baseline/{record_id}` unmarks one.
@@ -225,6 +227,12 @@ pub struct MachineBody {
     /// A number so that `10.0` is read as 10 (JSON Schema's integers); checked to be whole.
     #[serde(default)]
     pub tacho_ppr: Option<f64>,
+    /// What each channel measures ([`super::units`]).
+    #[serde(default)]
+    pub channel_units: Option<BTreeMap<String, crate::units::UnitSpec>>,
+    /// The machine's ISO 20816-3 class.
+    #[serde(default)]
+    pub iso_20816: Option<super::units::IsoBody>,
 }
 
 /// The default name of a record's tachometer channel, for a machine that names none.
@@ -263,12 +271,15 @@ pub fn check_tacho(
 
 /// The configuration part of a machine's JSON.
 pub fn config_json(m: &MachineRow) -> Value {
+    let (channel_units, iso) = super::units::config_json(m);
     json!({
         "gearbox": m.gearbox_id.clone().unwrap_or_else(|| BUILTIN_ID.to_string()),
         "input_shaft_hz": m.input_shaft_hz,
         "channels": m.channels,
         "tacho_channel": m.tacho_channel,
         "tacho_ppr": m.tacho_ppr,
+        "channel_units": channel_units,
+        "iso_20816": iso,
     })
 }
 
@@ -292,7 +303,9 @@ pub async fn put(
             "Invalid machine configuration",
             format!(
                 "{e}; expected {{\"gearbox\": \"<gearbox id>\", \"input_shaft_hz\"?: number, \
-                 \"channels\"?: [names], \"tacho_channel\"?: name, \"tacho_ppr\"?: integer}}"
+                 \"channels\"?: [names], \"tacho_channel\"?: name, \"tacho_ppr\"?: integer, \
+                 \"channel_units\"?: {{\"<channel>\": {{\"unit\": \"g\"}}}}, \
+                 \"iso_20816\"?: {{\"group\": 1 or 2, \"support\": \"rigid\" or \"flexible\"}}}}"
             ),
         )
     })?;
@@ -348,6 +361,13 @@ pub async fn put(
     check_tacho(b.tacho_channel.as_deref(), tacho_ppr, b.channels.as_deref()).map_err(|e| {
         ApiError::unprocessable("invalid-machine", "Invalid machine configuration", e)
     })?;
+    let (channel_units, iso) = super::units::check(
+        b.channel_units,
+        b.iso_20816.as_ref(),
+        b.channels.as_deref(),
+        b.tacho_channel.as_deref(),
+    )
+    .map_err(|r| r.problem())?;
     let created = app
         .store
         .put_machine(
@@ -358,6 +378,9 @@ pub async fn put(
                 channels: b.channels,
                 tacho_channel: b.tacho_channel,
                 tacho_ppr,
+                channel_units,
+                iso_group: iso.map(|c| i64::from(c.group)),
+                iso_support: iso.map(|c| c.support.as_str().to_string()),
             },
             now_ms(),
         )

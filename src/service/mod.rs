@@ -36,6 +36,7 @@ pub mod read;
 pub mod records;
 pub mod signatures;
 pub mod spectrum;
+pub mod units;
 pub mod webhooks;
 pub mod wire;
 

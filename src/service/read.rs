@@ -97,6 +97,13 @@ pub async fn get_machine(
         s["state_note"] = full.get("state_note").cloned().unwrap_or(Value::Null);
         s["wear_note"] = full.get("wear_note").cloned().unwrap_or(Value::Null);
         s["findings"] = full.get("findings").cloned().unwrap_or(json!([]));
+        // The figures in physical units: the wear in µm and, for a channel whose unit the
+        // machine declares, its vibration (absent, not null, when there are none).
+        for k in ["wear_degree_um", "vibration"] {
+            if let Some(v) = full.get(k) {
+                s[k] = v.clone();
+            }
+        }
         s
     });
     let mut body = machine_summary(&m);

@@ -33,6 +33,7 @@ use crate::keys::Scope;
 use crate::store::{
     DiagnosisRow, IdemRow, Ingest, MachineRow, NewRecord, StoreError, new_id, now_ms,
 };
+use crate::units::MachineUnits;
 
 /// The handler.
 pub async fn post_record(
@@ -506,6 +507,8 @@ struct AssessJob {
     /// Posted with `?baseline=true`.
     declared_healthy: bool,
     tacho: Option<TachoChannel>,
+    /// The machine's declared units and ISO class.
+    units: MachineUnits,
 }
 
 type JobResult = (Decoded, Assessment, Option<PlotSpectrum>, StageClock);
@@ -530,6 +533,7 @@ impl RecordRequest {
             ctx.machine.as_ref().and_then(|m| m.channels.as_deref()),
             tacho_index,
         )?;
+        let units = super::units::machine_units(ctx.machine.as_ref())?;
         let baselines = super::machines::baselines(app, machine_id, &ctx.gearbox_row.hash).await?;
         let calibration = app
             .store
@@ -545,6 +549,7 @@ impl RecordRequest {
             thresholds: app.settings.thresholds,
             declared_healthy: self.declared_healthy,
             tacho: self.tacho,
+            units,
         })
     }
 }
@@ -575,6 +580,7 @@ impl AssessJob {
             baseline_counts: &self.baselines.counts,
             calibration: self.calibration.as_ref(),
             thresholds: self.thresholds,
+            units: std::mem::take(&mut self.units),
         };
         let a = assess(
             &mut self.dec.channels,

@@ -38,19 +38,6 @@ async fn put_gearbox(app: &TestApp, id: &str, key: &str, text: &str) -> (u16, Va
     (s, json(&body))
 }
 
-async fn put_machine(app: &TestApp, id: &str, body: Value) -> (u16, Value) {
-    let (s, _, b) = checked(
-        app.client
-            .put(app.url(&format!("/v1/machines/{id}")))
-            .bearer_auth(&app.admin_key)
-            .json(&body),
-        "PUT",
-        "/v1/machines/{machine_id}",
-    )
-    .await;
-    (s, json(&b))
-}
-
 async fn get_json(app: &TestApp, path: &str, template: &str) -> Value {
     let (s, _, b) = checked(
         app.client.get(app.url(path)).bearer_auth(&app.read_key),

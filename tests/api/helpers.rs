@@ -342,8 +342,19 @@ impl Drop for TestApp {
     }
 }
 
+/// The lines of [`record_samples`]: (frequency / f1, amplitude).
+pub const RECORD_LINES: [(f64, f64); 6] = [
+    (1.0, 1.0),
+    (0.36, 0.2),
+    (0.72, 0.1),
+    (0.0875, 0.05),
+    (0.64, 0.05),
+    (2.0, 0.3),
+];
+
 /// A 1 s synthetic record at 25.6 kHz with the rig's kinematic lines at f1 = Ω1 · 870 Hz
-/// (the diagnosis core finds f1 and answers; its accuracy is tested in `tests/diagnosis.rs`).
+/// ([`RECORD_LINES`]) and uniform noise of ±0.01 (the diagnosis core finds f1 and answers;
+/// its accuracy is tested in `tests/diagnosis.rs`).
 pub fn record_samples(omega1: f64, seconds: f64, seed: u64) -> (Vec<f64>, f64) {
     let fs = 25_600.0;
     let f1 = omega1 * 870.0;
@@ -356,12 +367,10 @@ pub fn record_samples(omega1: f64, seconds: f64, seed: u64) -> (Vec<f64>, f64) {
                 .wrapping_mul(6364136223846793005)
                 .wrapping_add(1442695040888963407);
             let noise = ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.02;
-            (TAU * f1 * t).sin()
-                + 0.2 * (TAU * 0.36 * f1 * t).sin()
-                + 0.1 * (TAU * 0.72 * f1 * t).sin()
-                + 0.05 * (TAU * 0.0875 * f1 * t).sin()
-                + 0.05 * (TAU * 0.64 * f1 * t).sin()
-                + 0.3 * (TAU * 2.0 * f1 * t).sin()
+            RECORD_LINES
+                .iter()
+                .map(|(r, a)| a * (TAU * r * f1 * t).sin())
+                .sum::<f64>()
                 + noise
         })
         .collect();
@@ -532,6 +541,20 @@ pub async fn checked(
     let body = r.bytes().await.unwrap().to_vec();
     check_response(method, template, status, &ct, &body);
     (status, headers, body)
+}
+
+/// `PUT /v1/machines/{id}` with the admin key, checked against the spec: status and body.
+pub async fn put_machine(app: &TestApp, id: &str, body: Value) -> (u16, Value) {
+    let (s, _, b) = checked(
+        app.client
+            .put(app.url(&format!("/v1/machines/{id}")))
+            .bearer_auth(&app.admin_key)
+            .json(&body),
+        "PUT",
+        "/v1/machines/{machine_id}",
+    )
+    .await;
+    (s, json(&b))
 }
 
 pub fn json(body: &[u8]) -> Value {

@@ -341,6 +341,9 @@ async fn the_store_refuses_an_unregistered_machine_inside_the_transaction(b: Bac
             channels: None,
             tacho_channel: None,
             tacho_ppr: 1,
+            channel_units: None,
+            iso_group: None,
+            iso_support: None,
         },
         5,
     )

@@ -16,4 +16,5 @@ mod openapi;
 mod operating_state;
 mod security;
 mod store;
+mod units;
 mod webhooks;

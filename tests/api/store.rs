@@ -200,6 +200,9 @@ async fn baseline_marks_touch_only_the_machine_s_records(b: Backend) {
         channels: Some(vec!["a1".into(), "a2".into()]),
         tacho_channel: Some("speed".into()),
         tacho_ppr: 60,
+        channel_units: Some(r#"{"a1":{"unit":"V","sensitivity_mv_per_g":100.0}}"#.into()),
+        iso_group: Some(2),
+        iso_support: Some("rigid".into()),
     };
     assert!(st.put_machine(&cfg, 5).await.unwrap());
     assert!(!st.put_machine(&cfg, 6).await.unwrap());
@@ -211,6 +214,24 @@ async fn baseline_marks_touch_only_the_machine_s_records(b: Backend) {
         (Some("speed"), 60)
     );
     assert_eq!((m.record_count, m.alert_level.as_str()), (0, "unknown"));
+    assert_eq!(m.channel_units, cfg.channel_units);
+    assert_eq!(
+        (m.iso_group, m.iso_support.as_deref()),
+        (Some(2), Some("rigid"))
+    );
+    // A later PUT without units clears them (a configuration is replaced whole).
+    let unitless = MachineConfig {
+        channel_units: None,
+        iso_group: None,
+        iso_support: None,
+        ..cfg.clone()
+    };
+    assert!(!st.put_machine(&unitless, 7).await.unwrap());
+    let m = st.get_machine("m3").await.unwrap().unwrap();
+    assert_eq!(
+        (m.channel_units, m.iso_group, m.iso_support),
+        (None, None, None)
+    );
     st.close().await;
 }
 

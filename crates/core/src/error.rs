@@ -158,6 +158,33 @@ pub enum Error {
          (add records known to be healthy)"
     )]
     BaselineTooSmall { records: usize, needed: usize },
+    /// A channel's declared unit (or the machine's ISO class) that cannot be used.
+    #[error(transparent)]
+    Unit(#[from] UnitError),
+    /// The record is too short to resolve the lower edge of a velocity band.
+    #[error(
+        "the record lasts {seconds:.3} s; a velocity over {lo_hz}–{hi_hz} Hz needs at least \
+         {needed_seconds:.3} s ({periods} periods of {lo_hz} Hz) to resolve the band's lower edge"
+    )]
+    RecordTooShortForBand {
+        seconds: f64,
+        needed_seconds: f64,
+        periods: f64,
+        lo_hz: f64,
+        hi_hz: f64,
+    },
+    /// The sample rate does not reach the upper edge of a velocity band.
+    #[error(
+        "the record's sample rate {sample_rate} Hz holds frequencies up to {nyquist_hz} Hz; a \
+         velocity over {lo_hz}–{hi_hz} Hz needs a sample rate above {needed} Hz"
+    )]
+    SampleRateBelowBand {
+        sample_rate: f64,
+        nyquist_hz: f64,
+        needed: f64,
+        lo_hz: f64,
+        hi_hz: f64,
+    },
 }
 
 /// `` `a1`, `a2`, `a3` ``; past 16 names, the first 16 and how many there are in all (a WAV
@@ -360,4 +387,78 @@ pub enum GearboxError {
     /// The resolved model is unusable (e.g. no rigid-body mode to balance the load).
     #[error("the described gearbox does not give a usable model: {0}")]
     Model(String),
+}
+
+/// What a channel's declared unit, or a machine's ISO 20816-3 class, can be refused for
+/// ([`crate::units`]). The messages name the values, not the caller's parameter: the service
+/// adds the member (`channel_units.a1`), the CLI the flag (`--unit`).
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum UnitError {
+    /// Not a unit gearwear converts.
+    #[error(
+        "`{unit}` is not a unit gearwear converts: use g or m/s² (an accelerometer), mm/s (a \
+         velocity sensor), or V with the sensor's sensitivity"
+    )]
+    Unknown { unit: String },
+    /// A displacement (proximity-probe) unit.
+    #[error(
+        "`{unit}` is a displacement: a proximity probe measures the shaft's motion relative to \
+         its bearing, not the housing vibration that a velocity RMS and the ISO 20816-3 zones \
+         describe; declare an accelerometer (g, m/s²) or a velocity sensor (mm/s), or V with \
+         the sensitivity of one"
+    )]
+    Displacement { unit: String },
+    /// Volts without the sensor's sensitivity.
+    #[error(
+        "a channel in V needs its sensor's sensitivity to be converted: in mV/g or mV/(m/s²) \
+         for an accelerometer, in mV/(mm/s) for a velocity sensor (it is on the sensor's \
+         calibration sheet)"
+    )]
+    NoSensitivity,
+    /// A sensitivity given for a channel that is not in volts.
+    #[error(
+        "a sensitivity ({value} mV/{per}) converts volts; this channel is in `{unit}`, which is \
+         already a physical unit: remove the sensitivity, or declare the unit V"
+    )]
+    SensitivityWithoutVolts {
+        unit: String,
+        value: f64,
+        per: &'static str,
+    },
+    /// More than one sensitivity.
+    #[error("give one sensitivity, not both mV/{first} and mV/{second}")]
+    TwoSensitivities {
+        first: &'static str,
+        second: &'static str,
+    },
+    /// A sensitivity out of range.
+    #[error(
+        "a sensitivity of {value} mV/{per} is not usable: it is a number above 0 and at most \
+         {max} (sensor sheets give 0.1 to 10 000 mV/g)"
+    )]
+    BadSensitivity {
+        value: f64,
+        per: &'static str,
+        max: f64,
+    },
+    /// A sensitivity written in a form that is not understood.
+    #[error(
+        "`{text}` is not a sensitivity: write a number and its unit, e.g. 100mV/g, \
+         10.2mV/(m/s²) or 20mV/(mm/s)"
+    )]
+    SensitivitySyntax { text: String },
+    /// An ISO 20816-3 machine group other than 1 or 2.
+    #[error(
+        "ISO 20816-3 machine group {group} does not exist: group 1 is large machines (300 kW to \
+         50 MW, or electrical machines with shaft height 315 mm and more), group 2 medium ones \
+         (15 kW to 300 kW, or shaft height 160 mm to 315 mm)"
+    )]
+    IsoGroup { group: i64 },
+    /// An ISO 20816-3 support other than rigid or flexible.
+    #[error(
+        "ISO 20816-3 support `{support}` is not known: \"rigid\" (the machine and its support's \
+         lowest natural frequency is at least 25 % above the main excitation frequency) or \
+         \"flexible\" (every other support)"
+    )]
+    IsoSupport { support: String },
 }

@@ -23,6 +23,8 @@
 //! - [`novelty`]: features of a record (order tracking, TSA metrics, band levels), a machine's
 //!   healthy baseline and the novelty score against it.
 //! - [`closed_loop`]: fit, residual, attribution to an effect of the library, refit.
+//! - [`units`]: a channel's declared unit and its conversion to SI; acceleration RMS and peak,
+//!   velocity RMS over 10–1000 Hz and the ISO 20816-3 zone.
 
 // Numeric kernels index several arrays with one loop variable; iterator chains would hide the
 // equations. `!(x > 0.0)` is used on purpose: it is true for NaN, which must be refused too.
@@ -41,5 +43,6 @@ pub mod record;
 pub mod signal;
 pub mod signature;
 pub mod solver;
+pub mod units;
 
 pub use error::{Error, Result};

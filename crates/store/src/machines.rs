@@ -26,6 +26,12 @@ pub struct MachineRow {
     /// When it was first configured (`PUT /v1/machines/{id}`); `None`: it exists only
     /// because records were posted for it.
     pub registered_at: Option<i64>,
+    /// What its channels measure: the JSON object of `channel_units` as checked and written
+    /// by the service; `None`: unitless.
+    pub channel_units: Option<String>,
+    /// Its ISO 20816-3 group (1 or 2) and support (`rigid` or `flexible`), both or neither.
+    pub iso_group: Option<i64>,
+    pub iso_support: Option<String>,
 }
 
 /// What `PUT /v1/machines/{id}` sets.
@@ -38,6 +44,10 @@ pub struct MachineConfig {
     pub tacho_channel: Option<String>,
     /// Pulses per input-shaft revolution (at least 1).
     pub tacho_ppr: i64,
+    /// `channel_units` as JSON (checked by the caller).
+    pub channel_units: Option<String>,
+    pub iso_group: Option<i64>,
+    pub iso_support: Option<String>,
 }
 
 /// What [`MachineStore::delete_machine`] took away.
@@ -113,6 +123,9 @@ macro_rules! machines_sql {
                 tacho_channel: r.try_get("tacho_channel")?,
                 tacho_ppr: r.try_get("tacho_ppr")?,
                 registered_at: r.try_get("registered_at")?,
+                channel_units: r.try_get("channel_units")?,
+                iso_group: r.try_get("iso_group")?,
+                iso_support: r.try_get("iso_support")?,
             })
         }
 
@@ -141,8 +154,10 @@ macro_rules! machines_sql {
                 let mut tx = self.pool.begin().await?;
                 let ins = sqlx::query(
                     "INSERT INTO machines (id, created_at, updated_at, gearbox_id, \
-                     input_shaft_hz, channels, tacho_channel, tacho_ppr, registered_at) \
-                     VALUES ($1, $2, $2, $3, $4, $5, $6, $7, $2) ON CONFLICT (id) DO NOTHING",
+                     input_shaft_hz, channels, tacho_channel, tacho_ppr, channel_units, \
+                     iso_group, iso_support, registered_at) \
+                     VALUES ($1, $2, $2, $3, $4, $5, $6, $7, $8, $9, $10, $2) \
+                     ON CONFLICT (id) DO NOTHING",
                 )
                 .bind(&m.id)
                 .bind(now)
@@ -151,6 +166,9 @@ macro_rules! machines_sql {
                 .bind(&channels)
                 .bind(&m.tacho_channel)
                 .bind(m.tacho_ppr)
+                .bind(&m.channel_units)
+                .bind(m.iso_group)
+                .bind(&m.iso_support)
                 .execute(&mut *tx)
                 .await?;
                 let created = ins.rows_affected() == 1;
@@ -158,6 +176,7 @@ macro_rules! machines_sql {
                     sqlx::query(
                         "UPDATE machines SET gearbox_id = $2, input_shaft_hz = $3, \
                          channels = $4, updated_at = $5, tacho_channel = $6, tacho_ppr = $7, \
+                         channel_units = $8, iso_group = $9, iso_support = $10, \
                          registered_at = COALESCE(registered_at, $5) WHERE id = $1",
                     )
                     .bind(&m.id)
@@ -167,6 +186,9 @@ macro_rules! machines_sql {
                     .bind(now)
                     .bind(&m.tacho_channel)
                     .bind(m.tacho_ppr)
+                    .bind(&m.channel_units)
+                    .bind(m.iso_group)
+                    .bind(&m.iso_support)
                     .execute(&mut *tx)
                     .await?;
                 }

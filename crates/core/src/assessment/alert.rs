@@ -303,6 +303,8 @@ mod tests {
                 basis: "novelty",
                 reason: String::new(),
             },
+            wear_um: None,
+            vibration: None,
         };
         let v = vec![
             ch("a1", "ok", 1.0),

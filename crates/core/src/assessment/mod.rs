@@ -6,9 +6,15 @@
 //! One function, [`assess`], builds it for the service (`POST …/records`) and for
 //! `gearwear diagnose`, so both give the same answer for the same record, baseline and
 //! calibration. The [`Assessment`] serialises to the diagnosis object of the API (the deciding
-//! channel's diagnosis fields, then `calibration`, `channel`, `channels`, `gearbox`,
-//! `operating_state`, `state_note`, `findings`, `novelty`, `state_reference`, `baseline`,
-//! `indicators`, `alert`).
+//! channel's diagnosis fields, then `wear_degree_um`, `calibration`, `channel`, `channels`,
+//! `gearbox`, `operating_state`, `state_note`, `findings`, `novelty`, `state_reference`,
+//! `baseline`, `vibration`, `indicators`, `alert`).
+//!
+//! A channel whose unit the machine declares ([`Machine::units`]) gets its `vibration` in
+//! physical units ([`crate::units::vibration`]: acceleration RMS and peak, velocity RMS over
+//! 10–1000 Hz, the ISO 20816-3 zone when the machine declares its class); a channel without
+//! one has no `vibration` member at all. `wear_degree_um` is the wear degree in µm (times the
+//! table's gearbox's reference length), present whenever `wear_degree` is.
 //!
 //! With a described gearbox the record's operating state is measured once ([`condition`]:
 //! tachometer, else tacho-less) and every channel's order-domain evidence computed from it; a
@@ -38,6 +44,7 @@ use crate::novelty::{
     record_features_with,
 };
 use crate::record::Record;
+use crate::units::{MachineUnits, Vibration, WearUm, vibration};
 
 /// What the assessment knows of the machine a record comes from.
 pub struct Machine<'a> {
@@ -64,6 +71,8 @@ pub struct Machine<'a> {
     /// The machine's calibration.
     pub calibration: Option<&'a MachineCalibration>,
     pub thresholds: Thresholds,
+    /// What its channels' numbers are (and its ISO 20816-3 class); empty: unitless.
+    pub units: MachineUnits,
 }
 
 /// What came with the record.
@@ -132,9 +141,15 @@ pub struct ChannelSummary {
     pub alert_level: &'static str,
     pub alert: Alert,
     pub wear_degree: Option<WearDegree>,
+    /// `wear_degree` in µm, when it is shown.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub wear_degree_um: Option<WearUm>,
     pub fit: Option<Fit>,
     pub novelty: Option<Novelty>,
     pub findings: Vec<Finding>,
+    /// In physical units, when the channel's unit is declared.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vibration: Option<Vibration>,
 }
 
 /// One channel of a record, analysed.
@@ -149,6 +164,10 @@ pub struct ChannelAssessment {
     pub state: Option<StateJudgement>,
     pub findings: Vec<Finding>,
     pub alert: Alert,
+    /// The wear degree in µm, when the reading shows one.
+    pub wear_um: Option<WearUm>,
+    /// In physical units, when the channel's unit is declared.
+    pub vibration: Option<Vibration>,
 }
 
 impl ChannelAssessment {
@@ -162,9 +181,11 @@ impl ChannelAssessment {
                 .reading
                 .as_ref()
                 .map(|r| r.diagnosis.wear_degree.clone()),
+            wear_degree_um: self.wear_um,
             fit: self.reading.as_ref().map(|r| r.diagnosis.fit.clone()),
             novelty: self.novelty.clone(),
             findings: self.findings.clone(),
+            vibration: self.vibration.clone(),
         }
     }
 }
@@ -175,6 +196,9 @@ pub struct Assessment {
     /// The deciding channel's diagnosis; its fields are the object's.
     #[serde(flatten)]
     pub reading: Reading,
+    /// The deciding channel's wear degree in µm, when it is shown.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub wear_degree_um: Option<WearUm>,
     /// How the machine's calibration entered (a calibrated machine with a table only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub calibration: Option<CalibrationUse>,
@@ -197,6 +221,9 @@ pub struct Assessment {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub state_reference: Option<StateJudgement>,
     pub baseline: BaselineUse,
+    /// The deciding channel's vibration in physical units, when its unit is declared.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vibration: Option<Vibration>,
     /// The deciding channel's condition indicators and order tracking, for people.
     pub indicators: Value,
     pub alert: Alert,
@@ -331,6 +358,20 @@ fn assess_channel(
             reason: format!("this record's operating state is not covered: {missing}"),
         };
     }
+    let vibration = machine
+        .units
+        .channels
+        .of(&name)
+        .map(|(spec, unit)| vibration(&rec.samples, rec.sample_rate, spec, unit, machine.units.iso))
+        .transpose()?;
+    let wear_um = reading.as_ref().and_then(|r| {
+        // The wear degree is in units of the reference length of the gearbox its table was
+        // computed for.
+        let gearbox = machine
+            .diagnoser
+            .map_or(machine.gearbox, |d| d.table().gearbox());
+        WearUm::of(&r.diagnosis.wear_degree, gearbox)
+    });
     stage("features");
     Ok(ChannelAssessment {
         name,
@@ -340,6 +381,8 @@ fn assess_channel(
         state,
         findings,
         alert,
+        wear_um,
+        vibration,
     })
 }
 
@@ -462,6 +505,7 @@ fn assemble(
     }
     Assessment {
         reading,
+        wear_degree_um: decide.wear_um,
         calibration,
         channel: decide.name.clone(),
         channels: (assessed.len() > 1)
@@ -481,6 +525,7 @@ fn assemble(
             min_records: MIN_BASELINE_RECORDS,
             this_record: facts.declared_healthy,
         },
+        vibration: decide.vibration.clone(),
         indicators: decide.features.indicators.clone(),
         alert: decide.alert.clone(),
         deciding: di,

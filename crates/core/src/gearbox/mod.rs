@@ -134,6 +134,14 @@ impl Gearbox {
         &self.description.name
     }
 
+    /// The reference length (µm): the unit of the wear degree `ea` — the description's
+    /// `reference_length_um`, else 5 µm (the first paper's `b`), as the model is built with.
+    pub fn reference_length_um(&self) -> f64 {
+        self.description
+            .reference_length_um
+            .unwrap_or(assumed::REFERENCE_LENGTH_UM)
+    }
+
     /// Exact kinematics at an input-shaft rate (Hz).
     pub fn kinematics(&self, input_hz: f64) -> Kinematics {
         self.topology.kinematics(input_hz)

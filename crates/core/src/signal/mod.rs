@@ -3,7 +3,8 @@
 //! table, the diagnosis and the closed loop), the search for a gearbox's stage-1 mesh line
 //! ([`mesh_search`]), order tracking and angular resampling ([`order`]) and the
 //! time-synchronous average with its gear condition metrics and the order analysis of every
-//! shaft of a gear train ([`tsa`]).
+//! shaft of a gear train ([`tsa`]), and the velocity RMS over a band and the acceleration level
+//! of a record in SI units ([`velocity`]).
 //!
 //! # Conventions (read this first)
 //!
@@ -39,6 +40,7 @@ mod plan;
 mod spectrum;
 mod stats;
 pub mod tsa;
+pub mod velocity;
 mod window;
 
 pub(crate) use phasor::{dtft_sums, unit_phasors};
