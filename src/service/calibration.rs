@@ -77,6 +77,11 @@ async fn calibrate(
         return Err(e);
     }
     check_machine_id(machine_id)?;
+    if app.settings.require_registered_machines {
+        // A strict fleet calibrates only the machines it knows (as it takes only their records).
+        let machine = app.store.get_machine(machine_id).await?;
+        super::lifecycle::check_registered(app, machine_id, machine.as_ref())?;
+    }
     let format = body_format(headers)?;
     let q = parse_query(query.as_deref())?;
     let bytes = read_body(headers, body_in, limits.max_body_bytes).await?;

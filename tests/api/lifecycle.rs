@@ -268,6 +268,16 @@ async fn a_strict_service_takes_records_only_for_registered_machines(b: Backend)
             "{detail}"
         );
     }
+    // A calibration for a machine nobody registered is refused the same way.
+    let req = app
+        .client
+        .post(app.url("/v1/machines/typo-7/calibration"))
+        .bearer_auth(&app.admin_key)
+        .json(&json_record(2));
+    let (s, _, body) = checked(req, "POST", "/v1/machines/{machine_id}/calibration").await;
+    assert_eq!(s, 404, "{}", json(&body));
+    assert_eq!(json(&body)["type"], "urn:gearwear:problem:unknown-machine");
+    assert!(app.store.get_calibration("typo-7").await.unwrap().is_none());
     // Nothing stored: no machine made, the old one as it was, no idempotent answer kept.
     assert!(app.store.get_machine("typo-7").await.unwrap().is_none());
     assert_eq!(record_count(&app, "legacy").await, Some(1));
