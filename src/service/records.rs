@@ -131,7 +131,14 @@ async fn ingest(
             &idem,
             declared_healthy,
         ),
-        diagnosis: diagnosis_row(&assessment, &body, spectrum.as_ref(), &ids, machine_id),
+        diagnosis: diagnosis_row(
+            &assessment,
+            &body,
+            spectrum.as_ref(),
+            &ids,
+            machine_id,
+            measured_at(&dec, &ids),
+        ),
         idempotency: idem.row(&response_text),
         event_extras: event_extras(&body),
         registered_only: app.settings.require_registered_machines,
@@ -325,6 +332,7 @@ fn record_row(
         machine_id: machine_id.to_string(),
         received_at: ids.now,
         recorded_at: dec.recorded_at.clone(),
+        measured_at: measured_at(dec, ids),
         sensor: dec.sensor.clone(),
         content_type: format.mime().into(),
         sample_rate_hz: dec.sample_rate_hz,
@@ -352,6 +360,7 @@ fn diagnosis_row(
     spectrum: Option<&PlotSpectrum>,
     ids: &Ids,
     machine_id: &str,
+    measured_at: i64,
 ) -> DiagnosisRow {
     let decide = a.deciding_channel();
     // No wear figure (no table, or the model does not fit the record): `has_wear` is false
@@ -379,7 +388,17 @@ fn diagnosis_row(
         novelty_score: decide.novelty.as_ref().map(|n| n.score),
         novelty_threshold: decide.novelty.as_ref().map(|n| n.threshold),
         channel: Some(decide.name.clone()),
+        measured_at,
     }
+}
+
+/// When the record was measured, unix ms: its `recorded_at` (checked as RFC 3339 when it was
+/// decoded), else the time it was received.
+fn measured_at(dec: &Decoded, ids: &Ids) -> i64 {
+    dec.recorded_at
+        .as_deref()
+        .and_then(crate::time::parse_rfc3339)
+        .unwrap_or(ids.now)
 }
 
 /// A request's `Idempotency-Key` and the hashes that identify it.

@@ -88,7 +88,10 @@ fn a_crossed_threshold_is_zero_days_and_a_falling_line_never_crosses() {
     );
     let down = fit(&line(20, 0.4, -0.01, 0.0, 1), &TrendOptions::default()).unwrap();
     assert!(down.fit.significant && down.crossing(0.8).is_none());
-    assert_eq!(verdict(Some(&down), &[("alarm", 0.8)]), "falling 0.010 per day");
+    assert_eq!(
+        verdict(Some(&down), &[("alarm", 0.8)]),
+        "falling 0.010 per day"
+    );
 }
 
 #[test]
