@@ -120,7 +120,7 @@ async fn ingest(
     let body = serde_json::to_value(&assessment)
         .map_err(|e| ApiError::internal(format!("the assessment did not serialise: {e}")))?;
     let response_text = answer(&body, &ids, machine_id, assessment.level()).to_string();
-    let ing = Ingest {
+    let mut ing = Ingest {
         record: record_row(
             app,
             &dec,
@@ -143,6 +143,9 @@ async fn ingest(
         event_extras: event_extras(&body),
         registered_only: app.settings.require_registered_machines,
     };
+    // The webhook payloads carry the machine's wear trend with this record in it.
+    let trend = super::trend::summary_with(app, &ing.diagnosis).await;
+    ing.event_extras.insert("trend_summary".into(), trend);
     clock.lap("assemble");
     if let Some(r) = store(app, ing, &idem).await? {
         return Ok(r);
@@ -244,7 +247,7 @@ fn tacho_of(
 
 /// What each webhook payload of the record carries besides the diagnosis row's members: the
 /// deciding channel's `findings` (strongest first) and the record's `operating_state`, as
-/// answered.
+/// answered (and, added by the caller, the machine's `trend_summary`).
 fn event_extras(body: &Value) -> serde_json::Map<String, Value> {
     ["findings", "operating_state"]
         .into_iter()

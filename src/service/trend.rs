@@ -230,6 +230,32 @@ pub fn wear_summary(app: &AppState, rows: &[DiagnosisRow]) -> Value {
     a
 }
 
+/// The machine's wear `trend_summary` with a new diagnosis in it (not stored yet): the latest
+/// stored diagnoses by measurement time plus this one, for the record's webhook payloads.
+/// Null when the history cannot be read (the record is still stored; its payloads then lack
+/// the trend).
+pub async fn summary_with(app: &AppState, d: &DiagnosisRow) -> Value {
+    let mut rows = match app
+        .store
+        .recent_diagnoses(&d.machine_id, SERIES_POINTS)
+        .await
+    {
+        Ok(rows) => rows,
+        Err(e) => {
+            tracing::warn!(machine_id = %d.machine_id, error = %e, "trend for the webhook payload");
+            return Value::Null;
+        }
+    };
+    let at = rows.partition_point(|r| r.measured_at <= d.measured_at);
+    let mut row = d.clone();
+    (row.body, row.spectrum) = (String::new(), String::new());
+    rows.insert(at, row);
+    if rows.len() > SERIES_POINTS as usize {
+        rows.remove(0);
+    }
+    wear_summary(app, &rows)
+}
+
 #[derive(Debug, Default, Deserialize)]
 struct TrendQuery {
     series: Option<String>,

@@ -1,7 +1,7 @@
 //! Trends and measurement time (issue 33 items 0 and 1), on both stores: a machine whose wear
 //! rises over twelve days of `recorded_at` has a significant trend and a projected alarm; the
 //! same records back-filled in another order give the same series and the same trend; the
-//! machine view's `trend_summary` is the wear trend; bad queries are refused naming the
+//! machine view's `trend_summary` and the webhook payload's are the wear trend; bad queries are refused naming the
 //! parameter.
 
 use serde_json::{Value, json};
@@ -51,9 +51,11 @@ async fn get_trend(app: &TestApp, machine: &str, query: &str) -> (u16, Value) {
     (s, json(&b))
 }
 
-async fn post(app: &TestApp, machine: &str, body: &Value) {
+/// POST a record, which must be accepted: the answer.
+async fn post(app: &TestApp, machine: &str, body: &Value) -> Value {
     let r = app.post_json(machine, body).await;
-    assert_eq!(r.status().as_u16(), 201, "{}", r.text().await.unwrap());
+    assert_eq!(r.status().as_u16(), 201);
+    r.json().await.unwrap()
 }
 
 async fn a_rising_wear_gives_a_projected_alarm_and_back_filling_gives_the_same_trend(b: Backend) {
@@ -64,8 +66,11 @@ async fn a_rising_wear_gives_a_projected_alarm_and_back_filling_gives_the_same_t
     let records: Vec<Value> = (0..DAYS)
         .map(|d| record(0.3 + 0.04 * d as f64, d, 40 + d as u64))
         .collect();
+    let (rx, url, _task) = crate::webhooks::start_receiver(0, 0).await;
+    crate::webhooks::create_hook(&app, &url).await;
+    let mut last_id = Value::Null;
     for r in &records {
-        post(&app, "live", r).await;
+        last_id = post(&app, "live", r).await["id"].clone();
     }
     // The same records back-filled: newest first, then the rest shuffled.
     let order = [11, 0, 7, 3, 10, 1, 5, 9, 2, 8, 4, 6];
@@ -95,6 +100,20 @@ async fn a_rising_wear_gives_a_projected_alarm_and_back_filling_gives_the_same_t
         live["verdict"].as_str().unwrap().contains("alarm"),
         "{live}"
     );
+
+    // The last record's webhook payload carries the trend with it: the same.
+    let payload_of_last = || -> Option<Value> {
+        rx.got.lock().unwrap().iter().find_map(|(_, b)| {
+            let p: Value = serde_json::from_slice(b).ok()?;
+            (p["diagnosis_id"] == last_id && p["event"] == "diagnosis.created").then_some(p)
+        })
+    };
+    crate::webhooks::wait_for("the last record's delivery", || payload_of_last().is_some()).await;
+    let p = payload_of_last().unwrap();
+    assert_eq!(p["measured_at"], "2026-11-12T08:00:00.000Z");
+    for k in ["fit", "projection", "verdict"] {
+        assert_eq!(p["trend_summary"][k], live[k], "{k}");
+    }
 
     // Back-filled in another order: the same points in measurement order, the same trend.
     let (_, back) = get_trend(&app, "backfill", "?series=wear").await;

@@ -125,3 +125,14 @@ fn erfc_matches_known_values() {
     // p = 0.05 two-sided at z = 1.959964.
     assert!((erfc(1.959_964 / std::f64::consts::SQRT_2) - 0.05).abs() < 1e-6);
 }
+
+#[test]
+fn a_long_series_resamples_random_pairs_and_still_covers_its_slope() {
+    // 200 points (19 900 pairs): the bootstrap uses random pairs.
+    let pts = line(200, 0.2, 0.004, 0.02, 11);
+    let t = fit(&pts, &TrendOptions::default()).unwrap();
+    let [lo, hi] = t.fit.slope_interval_90;
+    assert!(lo < 0.004 && 0.004 < hi, "{:?}", t.fit);
+    assert!(hi - lo < 0.002, "{:?}", t.fit);
+    assert!(t.fit.significant);
+}
