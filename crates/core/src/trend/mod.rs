@@ -58,7 +58,7 @@ impl Default for TrendOptions {
     fn default() -> Self {
         TrendOptions {
             resamples: 400,
-            seed: 0x7472_656e_64,
+            seed: 0x74_7265_6e64,
             alpha: 0.05,
             min_points: 6,
         }
