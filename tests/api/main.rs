@@ -16,5 +16,6 @@ mod openapi;
 mod operating_state;
 mod security;
 mod store;
+mod trend;
 mod units;
 mod webhooks;
