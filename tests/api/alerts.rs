@@ -256,7 +256,7 @@ async fn alert_lifecycle(b: Backend) {
 }
 
 /// Issue 33's target through the service: a machine alternating around the warning threshold
-/// opens at most one alert (the state machine's own test runs 200 records).
+/// for 200 records opens at most one alert.
 async fn hovering_machine_opens_one_alert(b: Backend) {
     let Some(app) = spawn_app(b, |s| {
         s.alerts = EpisodePolicy {
@@ -270,7 +270,7 @@ async fn hovering_machine_opens_one_alert(b: Backend) {
         return;
     };
     let m = "m-hover";
-    for i in 0..16u32 {
+    for i in 0..200u32 {
         let ea = if i % 2 == 0 { HIGH } else { LOW };
         post(&app, m, &wear_record(ea, 100 + i as u64 % 4, i)).await;
     }
@@ -282,4 +282,35 @@ async fn hovering_machine_opens_one_alert(b: Backend) {
     .await;
     assert_eq!(s, 200);
     assert_eq!(v["alerts"].as_array().unwrap().len(), 1, "{v}");
+
+    // The command line sees the same alert and acknowledges it, once.
+    let url = app.settings.database_url.clone();
+    let listed = gearwear_ok(&["alerts", "list", "--machine", m, "--database-url", &url]);
+    let row: Value = serde_json::from_str(listed.lines().next().unwrap()).unwrap();
+    assert_eq!(row["id"], v["alerts"][0]["id"]);
+    let id = row["id"].as_str().unwrap();
+    let args = [
+        "alerts",
+        "ack",
+        id,
+        "--note",
+        "gearbox inspected",
+        "--by",
+        "ann",
+    ];
+    let acked: Value = serde_json::from_str(&gearwear_ok(
+        &[&args[..], &["--database-url", &url]].concat(),
+    ))
+    .unwrap();
+    assert_eq!(
+        (&acked["state"], &acked["acknowledged_by"]),
+        (&json!("acknowledged"), &json!("ann"))
+    );
+    let again = gearwear_bin()
+        .args(args)
+        .args(["--database-url", &url])
+        .output()
+        .unwrap();
+    assert!(!again.status.success());
+    assert!(String::from_utf8_lossy(&again.stderr).contains("acknowledged already"));
 }
