@@ -12,6 +12,7 @@ mod cli;
 mod faults;
 mod gearboxes;
 mod lifecycle;
+mod mqtt;
 mod openapi;
 mod operating_state;
 mod security;
