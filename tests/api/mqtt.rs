@@ -151,7 +151,7 @@ async fn count(url: &str, sql: &'static str) -> i64 {
 /// f32 after a GWR1 header.
 fn payload(i: usize) -> Vec<u8> {
     let (x, fs) = record_samples(1.0, 0.08, i as u64);
-    if i % 2 == 0 {
+    if i.is_multiple_of(2) {
         serde_json::json!({"sample_rate_hz": fs, "samples": x, "shaft_hz": 30.0,
                            "record_id": format!("r{i}")})
         .to_string()
