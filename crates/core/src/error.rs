@@ -95,6 +95,11 @@ pub enum Error {
         requested: String,
         available: Vec<String>,
     },
+    /// The record has a defect that makes it untrustworthy (a dropout, a DC step, absurd
+    /// values, more spikes than can be repaired): what, where and why
+    /// ([`crate::record::quality`]).
+    #[error("{}", .0.message)]
+    RecordQuality(Box<crate::record::QualityFinding>),
     /// A record sample is NaN or ±∞.
     #[error("sample {index} of the record is {value}; the record must contain only finite numbers")]
     NonFiniteSample { index: usize, value: f64 },

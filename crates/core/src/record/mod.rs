@@ -20,6 +20,7 @@ mod channels;
 mod checks;
 mod csv;
 mod gzip;
+pub mod quality;
 mod raw_f32;
 mod wav;
 
@@ -36,6 +37,7 @@ pub use self::checks::{
 };
 use self::csv::{csv_channels, parse_csv};
 pub use self::gzip::{MAX_DECOMPRESSED_BYTES, gunzip};
+pub use self::quality::{Inspection, QualityFinding, inspect};
 use self::raw_f32::{f32_channels, parse_f32};
 pub use self::wav::{encode_wav, encode_wav_channels};
 use self::wav::{parse_wav, wav_channels};
