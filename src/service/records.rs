@@ -19,7 +19,7 @@ use sha2::{Digest, Sha256};
 use super::AppState;
 use super::auth::Caller;
 use super::error::{ApiError, ApiResult, problem_from_error};
-use super::http::{body_format, check_machine_id, content_decoded, read_body};
+use super::http::{body_format, check_machine_id, content_decoded, read_body, sniffed};
 use super::machines::{DEFAULT_TACHO_CHANNEL, MachineContext};
 use super::metrics::StageClock;
 use super::spectrum::{PlotSpectrum, plot_from_spectrum, plot_spectrum};
@@ -76,6 +76,7 @@ async fn ingest(
     // another thread at an await.
     let mut clock = StageClock::new();
     let bytes = content_decoded(headers, bytes, limits.max_body_bytes)?;
+    let (format, bytes, sniff_notes) = sniffed(format, bytes, limits.max_body_bytes)?;
     clock.lap("decode");
     let idem = Idempotency::of(
         headers,
@@ -105,10 +106,13 @@ async fn ingest(
     }
     .load(app, machine_id, machine, dec)
     .await?;
-    let (dec, assessment, spectrum, job_clock) = tokio::task::spawn_blocking(move || job.run())
+    let (dec, mut assessment, spectrum, job_clock) = tokio::task::spawn_blocking(move || job.run())
         .await
         .map_err(|e| ApiError::internal(format!("the diagnosis task failed: {e}")))?
         .map_err(|e| problem_from_error(&e))?;
+    for note in sniff_notes {
+        assessment.warn(note);
+    }
     clock.absorb(job_clock);
     clock.skip();
 

@@ -260,6 +260,14 @@ impl Assessment {
     pub fn level(&self) -> &'static str {
         self.alert.level
     }
+
+    /// Add a warning to the answer's `warnings`.
+    pub fn warn(&mut self, note: impl Into<String>) {
+        match &mut self.reading {
+            Reading::Table(d) => d.warnings.push(note.into()),
+            Reading::NoTable(n) => n.warnings.push(note.into()),
+        }
+    }
 }
 
 /// Assess a record: `channels` are all of the record's channels `(name, samples)` (each
