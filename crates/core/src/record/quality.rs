@@ -16,7 +16,7 @@
 //! | absurd value | \|x\| > [`ABSURD_MAGNITUDE`], or beyond the declared unit's plausible range ([`plausible_limit`]) | repaired when inside an isolated spike, else refused |
 //! | spike | a cluster of samples beyond [`SPIKE_SIGMAS`] σ_r of the median, at most [`MAX_SPIKE_WIDTH`] wide | up to [`MAX_REPAIRABLE_SPIKES`] repaired (linear interpolation between the neighbours), more refused |
 //! | dropout | a run of at least [`DROPOUT_MIN_RUN`] samples of one exact value | refused |
-//! | DC step | the means before and after one sample differ by more than [`DC_STEP_SIGMAS`] σ_r (both sides at least 10 % of the record) | refused |
+//! | DC step | the means before and after one sample differ by more than [`DC_STEP_SIGMAS`] σ_r and [`DC_STEP_NOISE`] standard errors (both sides at least 10 % of the record) | refused |
 
 use serde::Serialize;
 
@@ -35,6 +35,9 @@ pub const MAX_REPAIRABLE_SPIKES: usize = 8;
 pub const DROPOUT_MIN_RUN: usize = 32;
 /// A step of the mean by more than this many robust σ is a DC step (real records: ≤ 0.03).
 pub const DC_STEP_SIGMAS: f64 = 0.5;
+/// A DC step must also exceed this many standard errors of the shorter side's mean
+/// (σ_r / √m for m samples): a short record's segment means wander.
+pub const DC_STEP_NOISE: f64 = 6.0;
 /// A magnitude no vibration measurement reaches in any unit (its square still fits an `f64`
 /// summed over any record).
 pub const ABSURD_MAGNITUDE: f64 = 1e12;
@@ -292,8 +295,8 @@ fn find_dropout(x: &[f64], fs: f64) -> Result<()> {
 }
 
 /// Refuse a DC step: the split point `k` (both sides at least a tenth of the record) where
-/// the means of `x[..k]` and `x[k..]` differ most, when they differ by more than
-/// [`DC_STEP_SIGMAS`] σ_r.
+/// the means of `x[..k]` and `x[k..]` differ most relative to what is needed — more than
+/// [`DC_STEP_SIGMAS`] σ_r and more than [`DC_STEP_NOISE`] σ_r / √min(k, n − k).
 ///
 /// For a zero-mean vibration the two means differ by O(σ/√(n/10)); a step of the offset by d
 /// at k moves them apart by d.
@@ -305,18 +308,22 @@ fn find_dc_step(x: &[f64], fs: f64, sigma: f64) -> Result<()> {
     let total: f64 = x.iter().sum();
     let (lo, hi) = (n / 10, n - n / 10);
     let mut left = 0.0;
-    let (mut best, mut at) = (0.0_f64, 0usize);
+    let (mut best, mut at, mut excess) = (0.0_f64, 0usize, 0.0_f64);
     for (k, &v) in x.iter().enumerate().take(hi) {
         if k >= lo {
             let d = (left / k as f64 - (total - left) / (n - k) as f64).abs();
-            if d > best {
+            // Above the floor and above the noise of the shorter side's mean.
+            let need =
+                (DC_STEP_SIGMAS * sigma).max(DC_STEP_NOISE * sigma / (k.min(n - k) as f64).sqrt());
+            if d / need > excess {
+                excess = d / need;
                 best = d;
                 at = k;
             }
         }
         left += v;
     }
-    if best > DC_STEP_SIGMAS * sigma {
+    if excess > 1.0 {
         return Err(refuse(finding(
             "dc-step",
             (at, at),
