@@ -572,13 +572,14 @@ pub type Harness = fn(&[u8]);
 
 /// The harnesses by target name (the names of `fuzz/fuzz_targets/*.rs` and of the
 /// `fuzz/seeds/<target>/`, `fuzz/corpus/<target>/` and `fuzz/regressions/<target>/` folders).
-pub const TARGETS: [(&str, Harness); 6] = [
+pub const TARGETS: [(&str, Harness); 7] = [
     ("json_body", json_body),
     ("csv", csv),
     ("csv_gz", csv_gz),
     ("f32_raw", f32_raw),
     ("wav", wav),
     ("model_config", model_config),
+    ("quality", quality),
 ];
 
 /// The record-quality checks ([`gearwear::record::quality`]) on the input read as raw
