@@ -572,11 +572,51 @@ pub type Harness = fn(&[u8]);
 
 /// The harnesses by target name (the names of `fuzz/fuzz_targets/*.rs` and of the
 /// `fuzz/seeds/<target>/`, `fuzz/corpus/<target>/` and `fuzz/regressions/<target>/` folders).
-pub const TARGETS: [(&str, Harness); 6] = [
+pub const TARGETS: [(&str, Harness); 7] = [
     ("json_body", json_body),
     ("csv", csv),
     ("csv_gz", csv_gz),
     ("f32_raw", f32_raw),
     ("wav", wav),
     ("model_config", model_config),
+    ("quality", quality),
 ];
+
+/// The record-quality checks ([`gearwear::record::quality`]) on the input read as raw
+/// little-endian `f32` samples at 12.8 kHz. Checks: no panic; on a record that passes
+/// [`gearwear::record::check_signal`], [`gearwear::record::inspect`] either refuses with a
+/// finding whose sample range lies inside the record, or returns spans inside the record whose
+/// repair leaves every sample finite and changes no sample outside them.
+pub fn quality(data: &[u8]) {
+    let x: Vec<f64> = data
+        .chunks_exact(4)
+        .map(|c| f64::from(f32::from_le_bytes([c[0], c[1], c[2], c[3]])))
+        .collect();
+    if gearwear::record::check_signal(&x).is_err() {
+        return;
+    }
+    match gearwear::record::inspect(&x, 12_800.0, None) {
+        Ok(ins) => {
+            let mut y = x.clone();
+            ins.repair(&mut y);
+            let mut inside = vec![false; x.len()];
+            for &(a, b) in &ins.spans {
+                assert!(a <= b && b < x.len(), "span {a}..={b} outside the record");
+                inside[a..=b].iter_mut().for_each(|v| *v = true);
+            }
+            for (i, (a, b)) in x.iter().zip(&y).enumerate() {
+                assert!(b.is_finite(), "repair left sample {i} non-finite");
+                if !inside[i] {
+                    assert_eq!(a.to_bits(), b.to_bits(), "repair changed sample {i}");
+                }
+            }
+        }
+        Err(gearwear::Error::RecordQuality(f)) => {
+            assert!(
+                f.first_sample <= f.last_sample && f.last_sample < x.len(),
+                "{f:?}"
+            );
+        }
+        Err(e) => panic!("inspect failed with a non-quality error: {e}"),
+    }
+}

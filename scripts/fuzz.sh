@@ -24,7 +24,7 @@ secs="${1:-600}"
 shift || true
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
-  targets=(json_body csv csv_gz f32_raw wav model_config)
+  targets=(json_body csv csv_gz f32_raw wav model_config quality)
 fi
 sanitizer="${FUZZ_SANITIZER:-address}"
 tdir="${FUZZ_TARGET_DIR:-$PWD/target-fuzz-build}"

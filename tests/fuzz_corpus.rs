@@ -74,6 +74,7 @@ replay_test!(csv_gz);
 replay_test!(f32_raw);
 replay_test!(wav);
 replay_test!(model_config);
+replay_test!(quality);
 
 /// Every harness has committed seeds and a cargo-fuzz target, and every input folder a
 /// harness (a target added or renamed on one side only would silently lose its replay).

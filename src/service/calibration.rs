@@ -86,6 +86,7 @@ async fn calibrate(
     let q = parse_query(query.as_deref())?;
     let bytes = read_body(headers, body_in, limits.max_body_bytes).await?;
     let bytes = content_decoded(headers, bytes, limits.max_body_bytes)?;
+    let (format, bytes, _) = super::http::sniffed(format, bytes, limits.max_body_bytes)?;
     let dec = decode(format, &q, &bytes, limits, None)?;
     let samples = dec.single(q.channel.as_deref())?.to_vec();
     let Decoded {

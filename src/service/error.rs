@@ -210,6 +210,16 @@ pub fn problem_from_error(e: &crate::Error) -> ApiError {
         } => un("clipped-record", "Clipped record", e.to_string())
             .with("clipped_samples", *count as u64)
             .with("longest_run", *longest_run as u64),
+        E::RecordQuality(f) => un(
+            "record-quality",
+            "Record quality too poor to diagnose",
+            format!("{}; nothing was stored", f.message),
+        )
+        .with("defect", f.defect)
+        .with("first_sample", f.first_sample as u64)
+        .with("last_sample", f.last_sample as u64)
+        .with("start_s", f.start_s)
+        .with("end_s", f.end_s),
         E::NonFiniteSample { index, value } => un(
             "non-finite-sample",
             "Non-finite sample",

@@ -205,6 +205,54 @@ pub fn content_decoded(
     }
 }
 
+/// Content sniffing, the safety net under `Content-Type` and `Content-Encoding`: a body whose
+/// bytes are gzip (`1f 8b`) is inflated even without `Content-Encoding: gzip`, and a body that
+/// starts `RIFF….WAVE` is read as WAV whatever the `Content-Type` says, so neither is decoded
+/// as the wrong format. Returns the format to decode, the bytes, and a sentence per assumption
+/// for the answer's warnings.
+pub fn sniffed(
+    format: BodyFormat,
+    bytes: bytes_::Bytes,
+    limit: usize,
+) -> ApiResult<(BodyFormat, bytes_::Bytes, Vec<String>)> {
+    let mut notes = Vec::new();
+    let mut bytes = bytes;
+    if bytes.starts_with(&[0x1f, 0x8b]) {
+        let max = limit.saturating_mul(8);
+        bytes = crate::record::gunzip(&bytes, "body", max)
+            .map(bytes_::Bytes::from)
+            .map_err(|e| {
+                if e.to_string().contains("expands beyond") {
+                    body_too_large(max)
+                } else {
+                    let mut p = problem_from_error(&e);
+                    p.detail = format!(
+                        "the body starts with the gzip magic bytes (1f 8b) but could not be \
+                         inflated: {}; send the whole gzip file (with `Content-Encoding: gzip`) \
+                         or the uncompressed record",
+                        p.detail
+                    );
+                    p
+                }
+            })?;
+        notes.push(
+            "the body is gzip-compressed but came without `Content-Encoding: gzip`: it was \
+             inflated before decoding (send the header to say so)"
+                .to_string(),
+        );
+    }
+    let riff = bytes.len() >= 12 && &bytes[..4] == b"RIFF" && &bytes[8..12] == b"WAVE";
+    if riff && format != BodyFormat::Wav {
+        notes.push(format!(
+            "the body is a WAV file (it starts with RIFF….WAVE) sent as `{}`: it was read as \
+             audio/wav (send `Content-Type: audio/wav`)",
+            format.mime()
+        ));
+        return Ok((BodyFormat::Wav, bytes, notes));
+    }
+    Ok((format, bytes, notes))
+}
+
 /// The body format named by `Content-Type` (415 problem otherwise).
 pub fn body_format(headers: &HeaderMap) -> ApiResult<BodyFormat> {
     let ct = headers

@@ -19,7 +19,7 @@ use sha2::{Digest, Sha256};
 use super::AppState;
 use super::auth::Caller;
 use super::error::{ApiError, ApiResult, problem_from_error};
-use super::http::{body_format, check_machine_id, content_decoded, read_body};
+use super::http::{body_format, check_machine_id, content_decoded, read_body, sniffed};
 use super::machines::{DEFAULT_TACHO_CHANNEL, MachineContext};
 use super::metrics::StageClock;
 use super::spectrum::{PlotSpectrum, plot_from_spectrum, plot_spectrum};
@@ -77,6 +77,7 @@ async fn ingest(
     // another thread at an await.
     let mut clock = StageClock::new();
     let bytes = content_decoded(headers, bytes, limits.max_body_bytes)?;
+    let (format, bytes, sniff_notes) = sniffed(format, bytes, limits.max_body_bytes)?;
     clock.lap("decode");
     let idem = Idempotency::of(
         headers,
@@ -90,7 +91,8 @@ async fn ingest(
     if let Some(r) = idem.replay_stored(app).await? {
         return Ok(r);
     }
-    let prepared = prepare(app, machine_id, format, q, &bytes, &mut clock).await?;
+    let mut prepared = prepare(app, machine_id, format, q, &bytes, &mut clock).await?;
+    prepared.warnings = sniff_notes;
     if prepared.dec.record_id.is_some() {
         return Err(ApiError::bad_request(
             "invalid-json",
@@ -115,6 +117,8 @@ pub struct Prepared {
     /// The decoded record.
     pub dec: Decoded,
     request: RecordRequest,
+    /// Warnings about how the body was read (a sniffed format), added to the assessment's.
+    pub warnings: Vec<String>,
 }
 
 /// The steps of every record path (HTTP and MQTT) before the assessment: the machine (and,
@@ -144,6 +148,7 @@ pub async fn prepare(
             declared_healthy,
             tacho,
         },
+        warnings: Vec::new(),
     })
 }
 
@@ -173,13 +178,17 @@ pub async fn accept(
         machine,
         dec,
         request,
+        warnings,
     } = prepared;
     let declared_healthy = request.declared_healthy;
     let job = request.load(app, machine_id, machine, dec).await?;
-    let (dec, assessment, spectrum, job_clock) = tokio::task::spawn_blocking(move || job.run())
+    let (dec, mut assessment, spectrum, job_clock) = tokio::task::spawn_blocking(move || job.run())
         .await
         .map_err(|e| ApiError::internal(format!("the diagnosis task failed: {e}")))?
         .map_err(|e| problem_from_error(&e))?;
+    for note in warnings {
+        assessment.warn(note);
+    }
     clock.absorb(job_clock);
     clock.skip();
 

@@ -16,6 +16,7 @@ mod lifecycle;
 mod mqtt;
 mod openapi;
 mod operating_state;
+mod quality_battery;
 mod security;
 mod store;
 mod trend;

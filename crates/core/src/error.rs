@@ -58,7 +58,7 @@ pub enum Error {
     /// The record sits at its extreme value for runs of samples: the sensor or ADC saturated.
     #[error(
         "the record is clipped: {count} samples ({percent:.2} %) sit exactly at its {side} {level} \
-         in runs of up to {longest_run}; the sensor or its ADC saturated, which adds harmonics the \
+         in runs of up to {longest_run} (the longest from sample {longest_at}); the sensor or its ADC saturated, which adds harmonics the \
          gearbox did not make — lower the gain or widen the input range and record again"
     )]
     ClippedRecord {
@@ -68,6 +68,8 @@ pub enum Error {
         count: usize,
         percent: f64,
         longest_run: usize,
+        /// First sample of the longest run.
+        longest_at: usize,
     },
     /// The record's format carries no sample rate and none was given.
     #[error("{format} carries no sample rate: {give}")]
@@ -95,6 +97,11 @@ pub enum Error {
         requested: String,
         available: Vec<String>,
     },
+    /// The record has a defect that makes it untrustworthy (a dropout, a DC step, absurd
+    /// values, more spikes than can be repaired): what, where and why
+    /// ([`crate::record::quality`]).
+    #[error("{}", .0.message)]
+    RecordQuality(Box<crate::record::QualityFinding>),
     /// A record sample is NaN or ±∞.
     #[error("sample {index} of the record is {value}; the record must contain only finite numbers")]
     NonFiniteSample { index: usize, value: f64 },

@@ -25,6 +25,8 @@ pub mod alert;
 pub mod condition;
 pub mod diagnoser;
 pub mod episodes;
+pub mod quality;
+pub mod rate;
 
 use std::collections::BTreeMap;
 
@@ -36,6 +38,7 @@ pub use condition::{Measured, StateJudgement, TachoChannel, fit_baselines, state
 pub use diagnoser::{
     CalibrationUse, MachineCalibration, PathCorrection, TableDiagnoser, TableReading, WearInterval,
 };
+pub use quality::Quality;
 
 use crate::condition::{Finding, Load, OperatingState, StateBaseline};
 use crate::diagnosis::{Diagnosis, Fit, WearDegree};
@@ -228,6 +231,8 @@ pub struct Assessment {
     /// The deciding channel's condition indicators and order tracking, for people.
     pub indicators: Value,
     pub alert: Alert,
+    /// What the record-quality checks found and repaired ([`quality`]).
+    pub quality: Quality,
     /// Each chosen channel, analysed (in the order chosen).
     #[serde(skip)]
     pub assessed: Vec<ChannelAssessment>,
@@ -256,6 +261,14 @@ impl Assessment {
     pub fn level(&self) -> &'static str {
         self.alert.level
     }
+
+    /// Add a warning to the answer's `warnings`.
+    pub fn warn(&mut self, note: impl Into<String>) {
+        match &mut self.reading {
+            Reading::Table(d) => d.warnings.push(note.into()),
+            Reading::NoTable(n) => n.warnings.push(note.into()),
+        }
+    }
 }
 
 /// Assess a record: `channels` are all of the record's channels `(name, samples)` (each
@@ -271,6 +284,23 @@ pub fn assess(
     machine: &Machine,
     stage: &mut dyn FnMut(&'static str),
 ) -> crate::Result<Assessment> {
+    let mut quality = quality::inspect_channels(channels, chosen, facts.sample_rate_hz, machine)?;
+    let mismatch = quality::check_rate(channels, chosen, facts, machine, &mut quality);
+    assess_inspected(channels, chosen, facts, machine, quality, stage).map_err(|e| match mismatch {
+        Some(f) if quality::rate_explains(&e) => quality::rate_refusal(f, &e),
+        _ => e,
+    })
+}
+
+/// [`assess`] after the quality step.
+fn assess_inspected(
+    channels: &mut [(String, Vec<f64>)],
+    chosen: &[usize],
+    facts: &RecordFacts,
+    machine: &Machine,
+    quality: Quality,
+    stage: &mut dyn FnMut(&'static str),
+) -> crate::Result<Assessment> {
     let measured = condition::measure_record(channels, chosen, facts, machine)?;
     let mut assessed = Vec::with_capacity(chosen.len());
     for &i in chosen {
@@ -282,9 +312,17 @@ pub fn assess(
         };
         let result = assess_channel(name, &rec, facts, machine, &measured, stage);
         channels[i].1 = rec.samples;
-        assessed.push(result?);
+        let mut a = result?;
+        if let Some(why) = quality
+            .cap_reason
+            .as_deref()
+            .filter(|_| !facts.declared_healthy)
+        {
+            a.alert = quality::capped(&a.alert, why);
+        }
+        assessed.push(a);
     }
-    Ok(assemble(assessed, facts, machine, measured))
+    Ok(assemble(assessed, facts, machine, measured, quality))
 }
 
 /// The features of a record's chosen channels exactly as its assessment computes them — what
@@ -480,6 +518,7 @@ fn assemble(
     facts: &RecordFacts,
     machine: &Machine,
     measured: Measured,
+    quality: Quality,
 ) -> Assessment {
     let di = deciding(&assessed);
     let decide = &assessed[di];
@@ -529,6 +568,7 @@ fn assemble(
         vibration: decide.vibration.clone(),
         indicators: decide.features.indicators.clone(),
         alert: decide.alert.clone(),
+        quality,
         deciding: di,
         assessed,
     }

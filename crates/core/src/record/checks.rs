@@ -38,6 +38,9 @@ pub const CLIP_MIN_FRACTION: f64 = 1e-3;
 pub const CLIP_MIN_COUNT: usize = 8;
 /// Shortest run of consecutive samples at the extreme that counts as a saturated plateau.
 pub const CLIP_MIN_RUN: usize = 3;
+/// Fraction of the record at one extreme value that counts as clipping without a run of
+/// [`CLIP_MIN_RUN`] (with the [`CLIP_PILE_UP`] rule).
+pub const CLIP_PILE_UP_FRACTION: f64 = 0.01;
 /// How many times more samples the extreme value must hold than the nearest value inside it.
 pub const CLIP_PILE_UP: usize = 4;
 
@@ -49,7 +52,7 @@ pub const CLIP_PILE_UP: usize = 4;
 /// beyond it, so the record's maximum (or minimum) value is *exactly* repeated, in plateaus,
 /// far more often than any value just inside it. The rule, per extreme: at least
 /// max([`CLIP_MIN_COUNT`], [`CLIP_MIN_FRACTION`]·n) samples equal to it, a run of at least
-/// [`CLIP_MIN_RUN`] consecutive ones, and at least [`CLIP_PILE_UP`] times as many as the
+/// [`CLIP_MIN_RUN`] consecutive ones (or [`CLIP_PILE_UP_FRACTION`] of the record), and at least [`CLIP_PILE_UP`] times as many as the
 /// nearest value inside. An unclipped continuous record holds its extreme once; a quantised
 /// unclipped sine holds its top ADC code at most ≈ 2.4 times as often as the next code (the
 /// arcsine density near a peak), so neither trips the rule. Checked on the SpectraQuest
@@ -91,14 +94,17 @@ pub fn check_signal(x: &[f64]) -> Result<()> {
         if count < need {
             continue;
         }
-        let (mut run, mut longest) = (0usize, 0usize);
+        let (mut run, mut longest, mut longest_at) = (0usize, 0usize, 0usize);
         // The nearest value inside the extreme and how often it occurs.
         let mut next = f64::NAN;
         let mut next_count = 0usize;
-        for &v in x {
+        for (i, &v) in x.iter().enumerate() {
             if v == level {
                 run += 1;
-                longest = longest.max(run);
+                if run > longest {
+                    longest = run;
+                    longest_at = i + 1 - run;
+                }
             } else {
                 run = 0;
                 let closer = next.is_nan() || if level == hi { v > next } else { v < next };
@@ -110,13 +116,17 @@ pub fn check_signal(x: &[f64]) -> Result<()> {
                 }
             }
         }
-        if longest >= CLIP_MIN_RUN && count >= CLIP_PILE_UP * next_count {
+        // A fast signal clipped at a low level crosses it in runs of one or two samples (real
+        // SpectraQuest records clipped at 2 × RMS): a pile-up of 1 % of the record counts too.
+        let piled = count as f64 >= CLIP_PILE_UP_FRACTION * x.len() as f64;
+        if (longest >= CLIP_MIN_RUN || piled) && count >= CLIP_PILE_UP * next_count {
             return Err(Error::ClippedRecord {
                 side,
                 level,
                 count,
                 percent: 100.0 * count as f64 / x.len() as f64,
                 longest_run: longest,
+                longest_at,
             });
         }
     }

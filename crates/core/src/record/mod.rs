@@ -20,6 +20,7 @@ mod channels;
 mod checks;
 mod csv;
 mod gzip;
+pub mod quality;
 mod raw_f32;
 mod wav;
 
@@ -36,6 +37,7 @@ pub use self::checks::{
 };
 use self::csv::{csv_channels, parse_csv};
 pub use self::gzip::{MAX_DECOMPRESSED_BYTES, gunzip};
+pub use self::quality::{Inspection, QualityFinding, inspect};
 use self::raw_f32::{f32_channels, parse_f32};
 pub use self::wav::{encode_wav, encode_wav_channels};
 use self::wav::{parse_wav, wav_channels};
@@ -122,10 +124,19 @@ fn read_file(path: &Path, opts: &ReadOptions) -> Result<(Vec<u8>, Format, String
         path: name.clone(),
         source,
     })?;
-    if name.to_ascii_lowercase().ends_with(".gz") {
+    // By the name, else by the bytes: a gzip file is inflated whatever it is called.
+    if name.to_ascii_lowercase().ends_with(".gz") || bytes.starts_with(&[0x1f, 0x8b]) {
         bytes = gunzip(&bytes, &name, MAX_DECOMPRESSED_BYTES)?;
     }
-    let format = opts.format.unwrap_or_else(|| Format::from_path(path));
+    // A RIFF/WAVE file is read as WAV unless a format was chosen: never as text or raw f32.
+    let riff = bytes.len() >= 12 && &bytes[..4] == b"RIFF" && &bytes[8..12] == b"WAVE";
+    let format = opts.format.unwrap_or_else(|| {
+        if riff {
+            Format::Wav
+        } else {
+            Format::from_path(path)
+        }
+    });
     Ok((bytes, format, name))
 }
 
