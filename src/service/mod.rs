@@ -145,6 +145,7 @@ pub fn router(state: AppState) -> Router {
                 .delete(calibration::delete),
         )
         .route("/v1/diagnoses/{diagnosis_id}", get(read::get_diagnosis))
+        .route("/v1/records/{record_id}", get(read::get_record))
         .route("/v1/webhooks", post(webhooks::create).get(webhooks::list))
         .route("/v1/webhooks/{webhook_id}", delete(webhooks::delete))
         .route(
@@ -194,6 +195,7 @@ pub const ROUTES: &[(&str, &str)] = &[
     ("GET", "/v1/machines/{machine_id}/calibration"),
     ("DELETE", "/v1/machines/{machine_id}/calibration"),
     ("GET", "/v1/diagnoses/{diagnosis_id}"),
+    ("GET", "/v1/records/{record_id}"),
     ("POST", "/v1/webhooks"),
     ("GET", "/v1/webhooks"),
     ("DELETE", "/v1/webhooks/{webhook_id}"),

@@ -14,6 +14,7 @@ mod gearboxes;
 mod lifecycle;
 mod openapi;
 mod operating_state;
+mod planner;
 mod security;
 mod store;
 mod units;
