@@ -55,7 +55,13 @@ async fn seed_fleet(app: &TestApp) -> Value {
     post(app, "press-ok", "", &rig_record(0.1, 3)).await;
     let mut views = json!({});
     for id in ["press-alarm", "press-warning", "press-trend", "press-ok"] {
-        views[id] = json(&app.get(&format!("/v1/machines/{id}")).await.bytes().await.unwrap());
+        views[id] = json(
+            &app.get(&format!("/v1/machines/{id}"))
+                .await
+                .bytes()
+                .await
+                .unwrap(),
+        );
     }
     views
 }
@@ -73,9 +79,24 @@ async fn the_planner_reads_the_fleet_by_urgency() {
     };
     let views = seed_fleet(&app).await;
     let level = |id: &str| views[id]["alert_level"].as_str().unwrap().to_string();
-    assert_eq!(level("press-alarm"), "alarm", "{}", views["press-alarm"]["latest"]);
-    assert_eq!(level("press-warning"), "warning", "{}", views["press-warning"]["latest"]);
-    assert_eq!(level("press-trend"), "ok", "{}", views["press-trend"]["latest"]);
+    assert_eq!(
+        level("press-alarm"),
+        "alarm",
+        "{}",
+        views["press-alarm"]["latest"]
+    );
+    assert_eq!(
+        level("press-warning"),
+        "warning",
+        "{}",
+        views["press-warning"]["latest"]
+    );
+    assert_eq!(
+        level("press-trend"),
+        "ok",
+        "{}",
+        views["press-trend"]["latest"]
+    );
     assert_eq!(level("press-ok"), "ok", "{}", views["press-ok"]["latest"]);
     // With the trend API the rising machine has a projected crossing and comes third;
     // without it, it is one of the rest (ordered by id, after press-ok).
@@ -95,8 +116,12 @@ async fn the_planner_reads_the_fleet_by_urgency() {
     let Some((d, profile)) = start_driver().await else {
         return;
     };
-    d.cmd(reqwest::Method::POST, "/url", Some(json!({"url": app.url("/")})))
-        .await;
+    d.cmd(
+        reqwest::Method::POST,
+        "/url",
+        Some(json!({"url": app.url("/")})),
+    )
+    .await;
     let rows = d
         .wait_for(
             "the four machines in the overview",
@@ -125,27 +150,51 @@ async fn the_planner_reads_the_fleet_by_urgency() {
         // Every machine here has a wear figure: it reads in µm.
         let um = latest["wear_degree_um"]["estimate"].as_f64().unwrap();
         assert!(
-            row(id)["figures"].as_str().unwrap().contains(&format!("wear {um:.1} µm")),
+            row(id)["figures"]
+                .as_str()
+                .unwrap()
+                .contains(&format!("wear {um:.1} µm")),
             "{id}: {rows:?}"
         );
     }
-    let colours: std::collections::HashSet<&str> =
-        ["press-alarm", "press-warning", "press-ok"].iter().map(|id| row(id)["colour"].as_str().unwrap()).collect();
-    assert_eq!(colours.len(), 3, "alarm, warning and ok in three colours: {rows:?}");
+    let colours: std::collections::HashSet<&str> = ["press-alarm", "press-warning", "press-ok"]
+        .iter()
+        .map(|id| row(id)["colour"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        colours.len(),
+        3,
+        "alarm, warning and ok in three colours: {rows:?}"
+    );
     // Units: press-alarm's velocity and ISO zone as the API gives them.
     let v = &views["press-alarm"]["latest"]["vibration"];
     let fig = row("press-alarm")["figures"].as_str().unwrap();
     assert!(
-        fig.contains(&format!("{:.2} mm/s RMS", v["velocity_rms_mm_s"].as_f64().unwrap()))
-            && fig.contains(&format!("ISO zone {}", v["iso_20816_3"]["zone"].as_str().unwrap())),
+        fig.contains(&format!(
+            "{:.2} mm/s RMS",
+            v["velocity_rms_mm_s"].as_f64().unwrap()
+        )) && fig.contains(&format!(
+            "ISO zone {}",
+            v["iso_20816_3"]["zone"].as_str().unwrap()
+        )),
         "{fig} / {v}"
     );
-    assert!(row("press-ok")["figures"].as_str().unwrap().find("mm/s").is_none(), "{rows:?}");
+    assert!(
+        row("press-ok")["figures"]
+            .as_str()
+            .unwrap()
+            .find("mm/s")
+            .is_none(),
+        "{rows:?}"
+    );
     if projected {
         let s = &views["press-trend"]["trend_summary"];
         let days = s["projection"]["alarm"]["days"].as_f64().unwrap();
         let verdict = row("press-trend")["verdict"].as_str().unwrap();
-        assert!(verdict.starts_with(&format!("alarm in {} day", days.round())), "{verdict} / {s}");
+        assert!(
+            verdict.starts_with(&format!("alarm in {} day", days.round())),
+            "{verdict} / {s}"
+        );
         assert_eq!(row("press-trend")["tier"], "2", "{rows:?}");
     }
 
@@ -162,14 +211,28 @@ async fn the_planner_reads_the_fleet_by_urgency() {
     match &alerts {
         None => assert_eq!(listed["hidden"], true, "no alerts API, no panel: {listed}"),
         Some(a) => {
-            let mut api_ids: Vec<&str> =
-                a["alerts"].as_array().unwrap().iter().map(|x| x["id"].as_str().unwrap()).collect();
-            let mut shown: Vec<&str> =
-                listed["ids"].as_array().unwrap().iter().map(|x| x.as_str().unwrap()).collect();
+            let mut api_ids: Vec<&str> = a["alerts"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x["id"].as_str().unwrap())
+                .collect();
+            let mut shown: Vec<&str> = listed["ids"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.as_str().unwrap())
+                .collect();
             api_ids.sort();
             shown.sort();
             assert_eq!(shown, api_ids, "{listed} / {a}");
-            assert!(listed["machines"].as_array().unwrap().contains(&json!("press-alarm")), "{listed}");
+            assert!(
+                listed["machines"]
+                    .as_array()
+                    .unwrap()
+                    .contains(&json!("press-alarm")),
+                "{listed}"
+            );
             assert_eq!(listed["words"][0], "alarm", "the alarm first: {listed}");
         }
     }
@@ -201,7 +264,16 @@ async fn urgency_rules_hold(d: &crate::browser::Driver) {
         .await;
     assert_eq!(
         order,
-        json!(["acked:0", "a-now:0", "w-alert:1", "w-plain:1", "near:2", "far:2", "unk:3", "ok-1:3"]),
+        json!([
+            "acked:0",
+            "a-now:0",
+            "w-alert:1",
+            "w-plain:1",
+            "near:2",
+            "far:2",
+            "unk:3",
+            "ok-1:3"
+        ]),
         "urgency order"
     );
 }
@@ -248,7 +320,10 @@ async fn deep_links_open_a_machine_and_a_record(
             .await;
         assert!(page.as_array().unwrap().contains(&json!("alarm")), "{page}");
     } else {
-        assert_eq!(page["projection"], false, "no trend API, no projection: {page}");
+        assert_eq!(
+            page["projection"], false,
+            "no trend API, no projection: {page}"
+        );
     }
     let png = d.cmd(reqwest::Method::GET, "/screenshot", None).await;
     save_png(&png, "gearwear-planner-machine.png");
@@ -277,7 +352,10 @@ async fn deep_links_open_a_machine_and_a_record(
     );
     let ea = latest["wear_degree"]["estimate"].as_f64().unwrap();
     assert!(
-        rec["wear"].as_str().unwrap().starts_with(&format!("{ea:.3}")),
+        rec["wear"]
+            .as_str()
+            .unwrap()
+            .starts_with(&format!("{ea:.3}")),
         "{rec}"
     );
     // The same record by its record id, as a URL (alerts and trend points link so).

@@ -102,7 +102,7 @@ function renderAlert(m) {
   // A single-channel record's channel is just "0": name it only when several were diagnosed.
   if (l.channel && Array.isArray(l.channels) && l.channels.length > 1) bits.push("deciding channel: " + l.channel);
   if (a.basis) bits.push("based on: " + (a.basis === "none" ? "nothing (no fit, no baseline)" : a.basis));
-  bits.push("record of " + when(l.created_at));
+  bits.push("record of " + when(measuredAt(l)));
   $("alert-basis").textContent = bits.join(" · ");
 }
 
@@ -222,7 +222,7 @@ function renderFindings(l) {
 function renderLatest(m) {
   const l = m.latest;
   $("records").textContent = m.record_count;
-  $("latest-at").textContent = l ? when(l.created_at) : "";
+  $("latest-at").textContent = l ? when(measuredAt(l)) : "";
   const w = l && l.wear_degree;
   // No wear figure (the model does not fit, or no table): says why, never a number.
   $("wear-estimate").textContent = wearText(l, m);

@@ -3,7 +3,7 @@
 
 /** The shared time range of a machine's charts: its diagnoses' times, padded. */
 function timeDomain(trend) {
-  const ts = trend.map((p) => Date.parse(p.created_at)).filter(num);
+  const ts = trend.map((p) => Date.parse(measuredAt(p))).filter(num);
   let t0 = ts.length ? Math.min(...ts) : Date.now() - HOUR;
   let t1 = ts.length ? Math.max(...ts) : Date.now();
   if (t1 - t0 < MIN) { const mid = (t0 + t1) / 2; t0 = mid - MIN / 2; t1 = mid + MIN / 2; }
@@ -15,7 +15,7 @@ function renderTrend(m, dom) {
   const svg = $("trend");
   svg.innerHTML = "";
   const { W, H, pad } = CHART;
-  const pts = (m.trend || []).map((p) => ({ ...p, t: Date.parse(p.created_at) })).filter((p) => num(p.t));
+  const pts = (m.trend || []).map((p) => ({ ...p, t: Date.parse(measuredAt(p)) })).filter((p) => num(p.t));
   const th = m.thresholds || {};
   const uppers = pts.map((p) => p.upper).filter(num);
   const ymax = Math.max(1, num(th.alarm) ? th.alarm * 1.1 : 0, ...uppers);
@@ -33,13 +33,13 @@ function renderTrend(m, dom) {
     if (num(p.estimate)) {
       // Each point opens its record's diagnosis.
       const parent = p.diagnosis_id ? el("a", { href: "#/diagnoses/" + encodeURIComponent(p.diagnosis_id) }, svg) : svg;
-      const c = el("circle", { cx: sx(p.t), cy: sy(p.estimate), r: 3.5, fill: "#1d4ed8", class: "trend-point", "data-t": p.created_at }, parent);
-      tooltip(c, when(p.created_at) + ": ea " + p.estimate.toFixed(3) + (num(p.lower) ? " (" + p.lower.toFixed(2) + " … " + p.upper.toFixed(2) + ")" : "") + ", " + p.alert_level);
+      const c = el("circle", { cx: sx(p.t), cy: sy(p.estimate), r: 3.5, fill: "#1d4ed8", class: "trend-point", "data-t": measuredAt(p) }, parent);
+      tooltip(c, when(measuredAt(p)) + ": ea " + p.estimate.toFixed(3) + (num(p.lower) ? " (" + p.lower.toFixed(2) + " … " + p.upper.toFixed(2) + ")" : "") + ", " + p.alert_level);
     } else {
       // A diagnosis without a wear figure: a hollow mark on the axis, no line through it (never
       // a point at 0).
-      const c = el("circle", { cx: sx(p.t), cy: H - pad.b, r: 3.5, fill: "#fff", stroke: "#8a8f98", class: "trend-nowear", "data-t": p.created_at }, svg);
-      tooltip(c, when(p.created_at) + ": no wear figure (the model does not fit the record, or the gearbox's table is not ready), " + p.alert_level);
+      const c = el("circle", { cx: sx(p.t), cy: H - pad.b, r: 3.5, fill: "#fff", stroke: "#8a8f98", class: "trend-nowear", "data-t": measuredAt(p) }, svg);
+      tooltip(c, when(measuredAt(p)) + ": no wear figure (the model does not fit the record, or the gearbox's table is not ready), " + p.alert_level);
     }
   }
   for (const [name, v, c] of [["warning", th.warning, "var(--warning)"], ["alarm", th.alarm, "var(--alarm)"]]) {
@@ -55,7 +55,7 @@ function renderNovelty(m, dom) {
   const svg = $("novelty");
   svg.innerHTML = "";
   const { W, H, pad } = CHART;
-  const pts = (m.trend || []).map((p) => ({ ...p, t: Date.parse(p.created_at) })).filter((p) => num(p.t));
+  const pts = (m.trend || []).map((p) => ({ ...p, t: Date.parse(measuredAt(p)) })).filter((p) => num(p.t));
   const scored = pts.filter((p) => num(p.novelty));
   const ths = scored.map((p) => p.novelty_threshold).filter(num);
   const ymax = Math.max(1, ...scored.map((p) => p.novelty), ...ths.map((t) => 2 * t)) * 1.1;
@@ -90,8 +90,8 @@ function renderNovelty(m, dom) {
   }
   for (const p of scored) {
     const over = num(p.novelty_threshold) && p.novelty > p.novelty_threshold;
-    const c = el("circle", { cx: sx(p.t), cy: sy(p.novelty), r: 3.5, fill: over ? "var(--alarm)" : "#7c3aed", class: "novelty-point" + (over ? " anomalous" : ""), "data-t": p.created_at }, svg);
-    tooltip(c, when(p.created_at) + ": novelty " + p.novelty.toFixed(2) + (num(p.novelty_threshold) ? " (threshold " + p.novelty_threshold.toFixed(2) + ")" : "") + ", " + p.alert_level);
+    const c = el("circle", { cx: sx(p.t), cy: sy(p.novelty), r: 3.5, fill: over ? "var(--alarm)" : "#7c3aed", class: "novelty-point" + (over ? " anomalous" : ""), "data-t": measuredAt(p) }, svg);
+    tooltip(c, when(measuredAt(p)) + ": novelty " + p.novelty.toFixed(2) + (num(p.novelty_threshold) ? " (threshold " + p.novelty_threshold.toFixed(2) + ")" : "") + ", " + p.alert_level);
   }
   if (!scored.length) {
     const need = Math.max(0, (b.min_records || 3) - (b.count || 0));

@@ -68,6 +68,12 @@ const pad2 = (n) => String(n).padStart(2, "0");
 const MONTHS = ["Jan", "Feb", "Mar", "Apr", "May", "Jun", "Jul", "Aug", "Sep", "Oct", "Nov", "Dec"];
 function dateText(d) { return d.getDate() + " " + MONTHS[d.getMonth()] + " " + d.getFullYear(); }
 function clock(d, secs) { return pad2(d.getHours()) + ":" + pad2(d.getMinutes()) + (secs ? ":" + pad2(d.getSeconds()) : ""); }
+/**
+ * When a record was measured: its `measured_at` when the API gives one (the `recorded_at` it
+ * was posted with, else its receive time), else `created_at` (when it was received).
+ */
+function measuredAt(x) { return (x && (x.measured_at || x.created_at)) || null; }
+
 /** A timestamp for a person: local date and time. */
 function when(iso) {
   const t = Date.parse(iso);

@@ -15,8 +15,10 @@ function renderRecord(r) {
   ml.textContent = r.machine_id;
   ml.href = machineHref(r.machine_id);
   badge($("record-level"), r.alert_level, 1);
-  $("record-when").textContent = "measured " + when(d.measured_at || d.recorded_at || r.created_at) +
-    (d.measured_at || d.recorded_at ? ", received " + when(r.created_at) : "");
+  const measured = r.measured_at || d.measured_at;
+  $("record-when").textContent = measured && measured !== r.created_at
+    ? "measured " + when(measured) + ", received " + when(r.created_at)
+    : "received " + when(r.created_at);
   const a = d.alert || {};
   $("record-reason").textContent = a.reason || "";
   const facts = $("record-facts");
@@ -45,7 +47,7 @@ function renderRecord(r) {
     codeText(li, f.summary || f.kind || "");
     h("span", { class: "kind" }, li, (f.kind || "") + (num(f.strength) ? ", strength " + f.strength.toFixed(1) : ""));
   }
-  if (!fs.length) h("li", { class: "muted" }, ol, "no findings");
+  if (!fs.length) h("li", { class: "muted none" }, ol, "none: the record does not depart from a baseline at its speed and load (or the machine has none)");
   renderSpectrum({ spectrum: r.spectrum }, $("record-spectrum"));
 }
 

@@ -169,7 +169,7 @@ function fleetRow(tb, m, u, view) {
   if (fs.length > 2) h("div", { class: "muted" }, tdf, "+" + (fs.length - 2) + " more");
   if (!fs.length) h("span", { class: "muted" }, tdf, l ? "none" : "–");
   const tdr = h("td", { class: "last-record" }, tr);
-  if (l) h("a", { href: recordHref(l), class: "record-link" }, tdr, when(l.created_at));
+  if (l) h("a", { href: recordHref(l), class: "record-link" }, tdr, when(measuredAt(l)));
   else h("span", { class: "muted" }, tdr, "–");
 }
 
