@@ -325,6 +325,7 @@ async fn deep_links_open_a_machine_and_a_record(
             "no trend API, no projection: {page}"
         );
     }
+    projection_draws_the_documented_answer(d).await;
     let png = d.cmd(reqwest::Method::GET, "/screenshot", None).await;
     save_png(&png, "gearwear-planner-machine.png");
 
@@ -386,6 +387,48 @@ async fn deep_links_open_a_machine_and_a_record(
     .await;
     let png = d.cmd(reqwest::Method::GET, "/screenshot", None).await;
     save_png(&png, "gearwear-planner-overview.png");
+}
+
+/// The projection chart on an answer of the documented shape (page-side, on the real script):
+/// ten points over 18 days rising 0.02/day, the fit, both crossings with their intervals; the
+/// dashed fit meets the alarm line where the alarm crossing is drawn.
+async fn projection_draws_the_documented_answer(d: &crate::browser::Driver) {
+    let drawn = d
+        .script(
+            "const day = 86400000, t0 = Date.parse('2026-11-01T00:00:00Z'); \
+             const iso = (t) => new Date(t).toISOString(); \
+             const points = [...Array(10).keys()].map((i) => ({measured_at: iso(t0 + 2 * i * day), value: 0.1 + 0.04 * i, record_id: 'r' + i})); \
+             const last = t0 + 18 * day; \
+             const tr = {machine_id: 'x', series: 'wear', channel: null, unit: 'ea (reference lengths)', points, \
+               fit: {slope_per_day: 0.02, slope_interval_90: [0.015, 0.025], level: 0.46, significant: true}, \
+               thresholds: {warning: 0.5, alarm: 0.8}, \
+               projection: {warning: {days: 2, interval_90: [1.5, 3], at: iso(last + 2 * day)}, \
+                            alarm: {days: 17, interval_90: [13, 23], at: iso(last + 17 * day)}}, \
+               verdict: 'alarm in 17 days (90 % interval 13–23)'}; \
+             renderProjection(tr); \
+             const q = (s) => [...document.querySelectorAll('#projection ' + s)]; \
+             const proj = q('.fit-projection')[0]; \
+             const alarmMark = q('.crossing-mark[data-name=alarm]')[0]; \
+             const out = {shown: !document.getElementById('projection-fig').hidden, points: q('.proj-point').length, \
+               links: q('a .proj-point').length, fit: q('.fit-line').length, \
+               marks: q('.crossing-mark').map((c) => c.dataset.name), intervals: q('.crossing-interval').length, \
+               verdict: document.getElementById('projection-verdict').textContent, \
+               end: [+proj.getAttribute('x2'), +proj.getAttribute('y2')], \
+               alarm: [+alarmMark.getAttribute('cx'), +alarmMark.getAttribute('cy')]}; \
+             return out",
+        )
+        .await;
+    assert_eq!(drawn["shown"], true, "{drawn}");
+    assert_eq!(drawn["points"], 10, "{drawn}");
+    assert_eq!(drawn["links"], 10, "each point links to its record: {drawn}");
+    assert_eq!(drawn["fit"], 1, "{drawn}");
+    assert_eq!(drawn["marks"], json!(["warning", "alarm"]), "{drawn}");
+    assert_eq!(drawn["intervals"], 2, "{drawn}");
+    assert!(drawn["verdict"].as_str().unwrap().starts_with("alarm in 17 days"), "{drawn}");
+    for k in 0..2 {
+        let (a, b) = (drawn["end"][k].as_f64().unwrap(), drawn["alarm"][k].as_f64().unwrap());
+        assert!((a - b).abs() < 1.0, "the fit ends at the alarm crossing: {drawn}");
+    }
 }
 
 /// A WebDriver screenshot into the temporary directory (to look at, not compared).
