@@ -145,13 +145,13 @@ pub fn router(state: AppState) -> Router {
                 .delete(calibration::delete),
         )
         .route("/v1/diagnoses/{diagnosis_id}", get(read::get_diagnosis))
-        .route("/v1/records/{record_id}", get(read::get_record))
         .route("/v1/webhooks", post(webhooks::create).get(webhooks::list))
         .route("/v1/webhooks/{webhook_id}", delete(webhooks::delete))
         .route(
             "/v1/webhooks/{webhook_id}/deliveries",
             get(webhooks::deliveries),
         )
+        .route("/v1/records/{record_id}", get(read::get_record))
         .route("/healthz", get(health::healthz))
         .route("/readyz", get(health::readyz))
         .route("/metrics", get(health::metrics))
@@ -195,11 +195,11 @@ pub const ROUTES: &[(&str, &str)] = &[
     ("GET", "/v1/machines/{machine_id}/calibration"),
     ("DELETE", "/v1/machines/{machine_id}/calibration"),
     ("GET", "/v1/diagnoses/{diagnosis_id}"),
-    ("GET", "/v1/records/{record_id}"),
     ("POST", "/v1/webhooks"),
     ("GET", "/v1/webhooks"),
     ("DELETE", "/v1/webhooks/{webhook_id}"),
     ("GET", "/v1/webhooks/{webhook_id}/deliveries"),
+    ("GET", "/v1/records/{record_id}"),
     ("GET", "/healthz"),
     ("GET", "/readyz"),
     ("GET", "/metrics"),

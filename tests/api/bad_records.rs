@@ -706,16 +706,16 @@ async fn bad_reads(b: Backend) {
             "unknown-diagnosis",
         ),
         (
-            "unknown record",
-            app.get("/v1/records/nope").await,
-            404,
-            "unknown-record",
-        ),
-        (
             "bad limit",
             app.get("/v1/machines/nope/diagnoses?limit=0").await,
             400,
             "invalid-query",
+        ),
+        (
+            "unknown record",
+            app.get("/v1/records/nope").await,
+            404,
+            "unknown-record",
         ),
         (
             "unknown route",

@@ -420,14 +420,29 @@ async fn projection_draws_the_documented_answer(d: &crate::browser::Driver) {
         .await;
     assert_eq!(drawn["shown"], true, "{drawn}");
     assert_eq!(drawn["points"], 10, "{drawn}");
-    assert_eq!(drawn["links"], 10, "each point links to its record: {drawn}");
+    assert_eq!(
+        drawn["links"], 10,
+        "each point links to its record: {drawn}"
+    );
     assert_eq!(drawn["fit"], 1, "{drawn}");
     assert_eq!(drawn["marks"], json!(["warning", "alarm"]), "{drawn}");
     assert_eq!(drawn["intervals"], 2, "{drawn}");
-    assert!(drawn["verdict"].as_str().unwrap().starts_with("alarm in 17 days"), "{drawn}");
+    assert!(
+        drawn["verdict"]
+            .as_str()
+            .unwrap()
+            .starts_with("alarm in 17 days"),
+        "{drawn}"
+    );
     for k in 0..2 {
-        let (a, b) = (drawn["end"][k].as_f64().unwrap(), drawn["alarm"][k].as_f64().unwrap());
-        assert!((a - b).abs() < 1.0, "the fit ends at the alarm crossing: {drawn}");
+        let (a, b) = (
+            drawn["end"][k].as_f64().unwrap(),
+            drawn["alarm"][k].as_f64().unwrap(),
+        );
+        assert!(
+            (a - b).abs() < 1.0,
+            "the fit ends at the alarm crossing: {drawn}"
+        );
     }
 }
 

@@ -111,10 +111,12 @@ function verdictText(view) {
   if (!s) return null;
   const p = projectedDays(view);
   if (!p) return s.verdict || null;
-  if (p.days <= 0) return p.threshold + " threshold crossed";
-  const iv = Array.isArray(p.interval) && num(p.interval[0]) && num(p.interval[1])
-    ? " (" + Math.round(p.interval[0]) + "–" + Math.round(p.interval[1]) + ")" : "";
-  return p.threshold + " in " + Math.round(p.days) + " day" + (Math.round(p.days) === 1 ? "" : "s") + iv;
+  if (p.days <= 0) return "above " + p.threshold;
+  // The 90 % interval of the days; an unbounded upper end (null) reads "≥ lower".
+  const iv = Array.isArray(p.interval) ? p.interval : [];
+  const ivText = num(iv[0]) && num(iv[1]) ? " (" + Math.round(iv[0]) + "–" + Math.round(iv[1]) + ")"
+    : num(iv[0]) ? " (≥ " + Math.round(iv[0]) + ")" : "";
+  return p.threshold + " in " + Math.round(p.days) + " day" + (Math.round(p.days) === 1 ? "" : "s") + ivText;
 }
 
 function recordHref(d) { return "#/diagnoses/" + encodeURIComponent(d.id); }

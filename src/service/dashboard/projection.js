@@ -110,7 +110,7 @@ function drawFit(svg, tr, pts, cross, sx, sy, t1) {
 /** A projected crossing: a marker on its threshold at the projected date (an arrow past the chart). */
 function drawCrossing(svg, c, sx, sy, t1) {
   const colour = c.name === "alarm" ? "var(--alarm)" : "var(--warning)";
-  const label = c.days <= 0 ? c.name + " crossed" : c.name + " ≈ " + dateText(new Date(c.at));
+  const label = c.days <= 0 ? "above " + c.name : c.name + " ≈ " + dateText(new Date(c.at));
   if (c.at > t1) {
     el("text", { x: sx(t1) - 2, y: sy(c.value) + 14, "text-anchor": "end", fill: colour, class: "crossing-label", "data-name": c.name },
       svg, label + " →");
