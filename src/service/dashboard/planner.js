@@ -134,7 +134,8 @@ function stateTag(lv, parent) {
 let overviewDrawn = "";
 function renderOverview(machines) {
   const rows = byUrgency(machines);
-  const drawnKey = JSON.stringify([rows.map((r) => [r.m, r.u, views.get(r.m.id)]), openAlerts]);
+  // A view is redrawn when its stamp moves (it is refetched then), not compared whole.
+  const drawnKey = JSON.stringify([rows.map((r) => [r.m, r.u, (views.get(r.m.id) || {}).stamp]), openAlerts]);
   if (drawnKey === overviewDrawn) return;
   overviewDrawn = drawnKey;
   const tb = $("fleet-rows");
