@@ -328,9 +328,9 @@ async fn deep_links_open_a_machine_and_a_record(
             "no trend API, no projection: {page}"
         );
     }
-    projection_draws_the_documented_answer(d).await;
     let png = d.cmd(reqwest::Method::GET, "/screenshot", None).await;
     save_png(&png, "gearwear-planner-machine.png");
+    projection_draws_the_documented_answer(d).await;
 
     // Its latest record, from the page's link.
     let latest = &views["press-trend"]["latest"];
