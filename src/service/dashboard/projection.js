@@ -68,8 +68,8 @@ function renderProjection(tr) {
   }
   const cross = crossings(tr);
   const [t0, t1] = projectionDomain(pts, cross);
-  // A round top (a tenth) so that the four grid steps read as round numbers.
-  const ymax = Math.ceil(10 * Math.max(num(th.alarm) ? th.alarm * 1.15 : 1, ...pts.map((p) => p.value)) * 1.02) / 10;
+  // A top at a multiple of 0.2 so that the four grid steps read as round numbers.
+  const ymax = Math.ceil(5 * Math.max(num(th.alarm) ? th.alarm * 1.15 : 1, ...pts.map((p) => p.value))) / 5;
   const ymin = Math.min(0, ...pts.map((p) => p.value));
   const [sx, sy] = timeAxes(svg, W, H, pad, t0, t1, ymin, ymax, tr.unit ? "wear, " + tr.unit : "wear degree ea");
   const clipT = (t) => Math.max(t0, Math.min(t1, t));
