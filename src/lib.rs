@@ -17,7 +17,7 @@
 
 pub use gearwear_core::{
     Error, Result, analysis, assessment, closed_loop, condition, diagnosis, error, gearbox, model,
-    novelty, record, signal, signature, solver, units,
+    novelty, record, signal, signature, solver, trend, units,
 };
 pub use gearwear_plot as plot;
 pub use gearwear_store::{self as store, time};

@@ -36,6 +36,7 @@ pub mod read;
 pub mod records;
 pub mod signatures;
 pub mod spectrum;
+pub mod trend;
 pub mod units;
 pub mod webhooks;
 pub mod wire;
@@ -138,6 +139,7 @@ pub fn router(state: AppState) -> Router {
             "/v1/machines/{machine_id}/diagnoses",
             get(read::list_diagnoses),
         )
+        .route("/v1/machines/{machine_id}/trend", get(trend::get_trend))
         .route(
             "/v1/machines/{machine_id}/calibration",
             post(calibration::post)
@@ -191,6 +193,7 @@ pub const ROUTES: &[(&str, &str)] = &[
     ("PUT", "/v1/gearboxes/{gearbox_id}"),
     ("POST", "/v1/machines/{machine_id}/records"),
     ("GET", "/v1/machines/{machine_id}/diagnoses"),
+    ("GET", "/v1/machines/{machine_id}/trend"),
     ("POST", "/v1/machines/{machine_id}/calibration"),
     ("GET", "/v1/machines/{machine_id}/calibration"),
     ("DELETE", "/v1/machines/{machine_id}/calibration"),

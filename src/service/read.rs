@@ -14,8 +14,9 @@ use super::http::{check_machine_id, json_with_etag};
 use crate::store::{DiagnosisRow, MachineRow, novelty_json, wear_json};
 use crate::time::{parse_rfc3339, rfc3339};
 
-/// How many diagnoses the machine view's wear trend shows.
-const TREND_POINTS: i64 = 200;
+/// How many diagnoses the machine view's wear trend shows (the latest by measurement time,
+/// the same as its `trend_summary` fits).
+const TREND_POINTS: i64 = super::trend::SERIES_POINTS;
 
 fn machine_summary(m: &MachineRow) -> Value {
     json!({
@@ -36,6 +37,7 @@ pub fn diagnosis_summary(d: &DiagnosisRow) -> Value {
         "machine_id": d.machine_id,
         "record_id": d.record_id,
         "created_at": rfc3339(d.created_at),
+        "measured_at": rfc3339(d.measured_at),
         "wear_degree": wear_json(d),
         "alert_level": d.alert_level,
         "motion_state": d.motion_state,
@@ -44,7 +46,7 @@ pub fn diagnosis_summary(d: &DiagnosisRow) -> Value {
     })
 }
 
-fn unknown_machine(id: &str) -> ApiError {
+pub(super) fn unknown_machine(id: &str) -> ApiError {
     ApiError::not_found(
         "unknown-machine",
         format!("no machine `{id}`: it has no accepted record and no configuration yet (machines appear with their first POSTed record or PUT /v1/machines/{id})"),
@@ -116,12 +118,14 @@ pub async fn get_machine(
     body["baseline"] = super::machines::baseline_json(&app, &m).await?;
     body["thresholds"] = serde_json::to_value(app.settings.thresholds).unwrap_or(Value::Null);
     body["latest"] = latest.unwrap_or(Value::Null);
+    body["trend_summary"] = super::trend::wear_summary(&app, &trend);
     body["trend"] = trend
         .iter()
         .map(|d| {
             json!({
                 "diagnosis_id": d.id,
                 "created_at": rfc3339(d.created_at),
+                "measured_at": rfc3339(d.measured_at),
                 "estimate": d.has_wear.then_some(d.ea_estimate),
                 "lower": d.has_wear.then_some(d.ea_lower),
                 "upper": d.has_wear.then_some(d.ea_upper),

@@ -120,7 +120,7 @@ async fn ingest(
     let body = serde_json::to_value(&assessment)
         .map_err(|e| ApiError::internal(format!("the assessment did not serialise: {e}")))?;
     let response_text = answer(&body, &ids, machine_id, assessment.level()).to_string();
-    let ing = Ingest {
+    let mut ing = Ingest {
         record: record_row(
             app,
             &dec,
@@ -131,11 +131,21 @@ async fn ingest(
             &idem,
             declared_healthy,
         ),
-        diagnosis: diagnosis_row(&assessment, &body, spectrum.as_ref(), &ids, machine_id),
+        diagnosis: diagnosis_row(
+            &assessment,
+            &body,
+            spectrum.as_ref(),
+            &ids,
+            machine_id,
+            measured_at(&dec, &ids),
+        ),
         idempotency: idem.row(&response_text),
         event_extras: event_extras(&body),
         registered_only: app.settings.require_registered_machines,
     };
+    // The webhook payloads carry the machine's wear trend with this record in it.
+    let trend = super::trend::summary_with(app, &ing.diagnosis).await;
+    ing.event_extras.insert("trend_summary".into(), trend);
     clock.lap("assemble");
     if let Some(r) = store(app, ing, &idem).await? {
         return Ok(r);
@@ -237,7 +247,7 @@ fn tacho_of(
 
 /// What each webhook payload of the record carries besides the diagnosis row's members: the
 /// deciding channel's `findings` (strongest first) and the record's `operating_state`, as
-/// answered.
+/// answered (and, added by the caller, the machine's `trend_summary`).
 fn event_extras(body: &Value) -> serde_json::Map<String, Value> {
     ["findings", "operating_state"]
         .into_iter()
@@ -325,6 +335,7 @@ fn record_row(
         machine_id: machine_id.to_string(),
         received_at: ids.now,
         recorded_at: dec.recorded_at.clone(),
+        measured_at: measured_at(dec, ids),
         sensor: dec.sensor.clone(),
         content_type: format.mime().into(),
         sample_rate_hz: dec.sample_rate_hz,
@@ -352,6 +363,7 @@ fn diagnosis_row(
     spectrum: Option<&PlotSpectrum>,
     ids: &Ids,
     machine_id: &str,
+    measured_at: i64,
 ) -> DiagnosisRow {
     let decide = a.deciding_channel();
     // No wear figure (no table, or the model does not fit the record): `has_wear` is false
@@ -379,7 +391,17 @@ fn diagnosis_row(
         novelty_score: decide.novelty.as_ref().map(|n| n.score),
         novelty_threshold: decide.novelty.as_ref().map(|n| n.threshold),
         channel: Some(decide.name.clone()),
+        measured_at,
     }
+}
+
+/// When the record was measured, unix ms: its `recorded_at` (checked as RFC 3339 when it was
+/// decoded), else the time it was received.
+fn measured_at(dec: &Decoded, ids: &Ids) -> i64 {
+    dec.recorded_at
+        .as_deref()
+        .and_then(crate::time::parse_rfc3339)
+        .unwrap_or(ids.now)
 }
 
 /// A request's `Idempotency-Key` and the hashes that identify it.

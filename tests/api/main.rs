@@ -17,5 +17,6 @@ mod operating_state;
 mod planner;
 mod security;
 mod store;
+mod trend;
 mod units;
 mod webhooks;

@@ -64,6 +64,11 @@ const TABLE: &[(&str, &str, Need)] = &[
         Need::Key(Scope::Read),
     ),
     (
+        "GET",
+        "/v1/machines/{machine_id}/trend",
+        Need::Key(Scope::Read),
+    ),
+    (
         "POST",
         "/v1/machines/{machine_id}/calibration",
         Need::Key(Scope::Admin),

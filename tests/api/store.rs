@@ -265,6 +265,7 @@ pub fn ingest(machine: &str, idem: Option<&str>, t: i64) -> Ingest {
             machine_id: machine.into(),
             received_at: t,
             recorded_at: None,
+            measured_at: t,
             sensor: None,
             content_type: "application/json".into(),
             sample_rate_hz: 25_600.0,
@@ -293,6 +294,7 @@ pub fn ingest(machine: &str, idem: Option<&str>, t: i64) -> Ingest {
             novelty_score: None,
             novelty_threshold: None,
             channel: None,
+            measured_at: t,
         },
         idempotency: idem.map(|k| IdemRow {
             key_id: "key".into(),

@@ -43,6 +43,7 @@ pub mod record;
 pub mod signal;
 pub mod signature;
 pub mod solver;
+pub mod trend;
 pub mod units;
 
 pub use error::{Error, Result};

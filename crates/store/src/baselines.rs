@@ -89,7 +89,7 @@ macro_rules! baselines_sql {
             async fn baseline_records(&self, machine_id: &str) -> StoreResult<Vec<BaselineRecord>> {
                 let rows = sqlx::query(
                     "SELECT id, received_at, baseline_at, features FROM records \
-                     WHERE machine_id = $1 AND baseline = 1 ORDER BY received_at, id",
+                     WHERE machine_id = $1 AND baseline = 1 ORDER BY measured_at, id",
                 )
                 .bind(machine_id)
                 .fetch_all(&self.pool)

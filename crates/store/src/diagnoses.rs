@@ -33,6 +33,9 @@ pub struct DiagnosisRow {
     pub novelty_threshold: Option<f64>,
     /// The channel that decides the alert.
     pub channel: Option<String>,
+    /// When its record was measured, unix ms: the record's `recorded_at`, else its receive
+    /// time. Series are ordered by it.
+    pub measured_at: i64,
 }
 
 /// `{estimate, lower, upper}`, or null for a diagnosis without a wear degree.
@@ -67,8 +70,16 @@ pub trait DiagnosisStore: Send + Sync {
         since: i64,
         limit: i64,
     ) -> StoreResult<Vec<DiagnosisRow>>;
-    /// The latest `limit` diagnosis summaries of one machine, oldest first.
+    /// The latest `limit` diagnosis summaries of one machine by measurement time, oldest
+    /// first (`measured_at`, ties by arrival).
     async fn recent_diagnoses(
+        &self,
+        machine_id: &str,
+        limit: i64,
+    ) -> StoreResult<Vec<DiagnosisRow>>;
+    /// Like [`recent_diagnoses`](Self::recent_diagnoses), with each diagnosis's `body` (the
+    /// answer's JSON; no spectrum): the series of a machine's trend.
+    async fn series_diagnoses(
         &self,
         machine_id: &str,
         limit: i64,
@@ -90,11 +101,20 @@ macro_rules! diagnoses_sql {
 
         const SUMMARY_COLS: &str = "seq, id, record_id, machine_id, created_at, ea_estimate, \
             ea_lower, ea_upper, alert_level, motion_state, has_wear, novelty_score, \
-            novelty_threshold, channel";
+            novelty_threshold, channel, measured_at";
 
         fn diagnosis_row(
             r: &<$db as sqlx::Database>::Row,
             full: bool,
+        ) -> StoreResult<DiagnosisRow> {
+            diagnosis_row_with(r, full, false)
+        }
+
+        /// A row with its spectrum when `full`, with its body when `full` or `body`.
+        fn diagnosis_row_with(
+            r: &<$db as sqlx::Database>::Row,
+            full: bool,
+            body: bool,
         ) -> StoreResult<DiagnosisRow> {
             Ok(DiagnosisRow {
                 seq: r.try_get("seq")?,
@@ -107,7 +127,7 @@ macro_rules! diagnoses_sql {
                 ea_upper: r.try_get("ea_upper")?,
                 alert_level: r.try_get("alert_level")?,
                 motion_state: r.try_get("motion_state")?,
-                body: if full {
+                body: if full || body {
                     r.try_get("body")?
                 } else {
                     String::new()
@@ -121,7 +141,39 @@ macro_rules! diagnoses_sql {
                 novelty_score: r.try_get("novelty_score")?,
                 novelty_threshold: r.try_get("novelty_threshold")?,
                 channel: r.try_get("channel")?,
+                measured_at: r
+                    .try_get::<Option<i64>, _>("measured_at")?
+                    .unwrap_or(r.try_get("created_at")?),
             })
+        }
+
+        /// The latest `limit` diagnoses of a machine by measurement time, oldest first; with
+        /// their bodies when `body`.
+        async fn latest_by_measurement(
+            pool: &sqlx::Pool<$db>,
+            machine_id: &str,
+            limit: i64,
+            body: bool,
+        ) -> StoreResult<Vec<DiagnosisRow>> {
+            let cols = if body {
+                format!("{SUMMARY_COLS}, body")
+            } else {
+                SUMMARY_COLS.to_string()
+            };
+            let rows = sqlx::query(sqlx::AssertSqlSafe(format!(
+                "SELECT {cols} FROM diagnoses WHERE machine_id = $1 \
+                 ORDER BY measured_at DESC, seq DESC LIMIT $2"
+            )))
+            .bind(machine_id)
+            .bind(limit)
+            .fetch_all(pool)
+            .await?;
+            let mut v: Vec<DiagnosisRow> = rows
+                .iter()
+                .map(|r| diagnosis_row_with(r, false, body))
+                .collect::<StoreResult<_>>()?;
+            v.reverse();
+            Ok(v)
         }
 
         #[async_trait::async_trait]
@@ -151,20 +203,15 @@ macro_rules! diagnoses_sql {
                 machine_id: &str,
                 limit: i64,
             ) -> StoreResult<Vec<DiagnosisRow>> {
-                let rows = sqlx::query(sqlx::AssertSqlSafe(format!(
-                    "SELECT {SUMMARY_COLS} FROM diagnoses WHERE machine_id = $1 \
-                     ORDER BY seq DESC LIMIT $2"
-                )))
-                .bind(machine_id)
-                .bind(limit)
-                .fetch_all(&self.pool)
-                .await?;
-                let mut v: Vec<DiagnosisRow> = rows
-                    .iter()
-                    .map(|r| diagnosis_row(r, false))
-                    .collect::<StoreResult<_>>()?;
-                v.reverse();
-                Ok(v)
+                latest_by_measurement(&self.pool, machine_id, limit, false).await
+            }
+
+            async fn series_diagnoses(
+                &self,
+                machine_id: &str,
+                limit: i64,
+            ) -> StoreResult<Vec<DiagnosisRow>> {
+                latest_by_measurement(&self.pool, machine_id, limit, true).await
             }
 
             async fn get_diagnosis(&self, id: &str) -> StoreResult<Option<DiagnosisRow>> {

@@ -13,6 +13,8 @@ pub struct NewRecord {
     pub machine_id: String,
     pub received_at: i64,
     pub recorded_at: Option<String>,
+    /// When it was measured, unix ms: `recorded_at` parsed, else `received_at`.
+    pub measured_at: i64,
     pub sensor: Option<String>,
     pub content_type: String,
     pub sample_rate_hz: f64,
@@ -70,6 +72,7 @@ pub fn ingest_events(prev_level: &str, ing: &Ingest, event_id: &str) -> Vec<(Str
         "diagnosis_id": d.id,
         "record_id": d.record_id,
         "created_at": crate::time::rfc3339(d.created_at),
+        "measured_at": crate::time::rfc3339(d.measured_at),
         "wear_degree": wear_json(d),
         "alert_level": d.alert_level,
         "motion_state": d.motion_state,
@@ -147,8 +150,8 @@ macro_rules! ingest_sql {
             sqlx::query(
                 "INSERT INTO records (id, machine_id, received_at, recorded_at, sensor, \
                  content_type, sample_rate_hz, shaft_hz, sample_count, sha256, features, \
-                 samples, baseline, baseline_at, channels) \
-                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15)",
+                 samples, baseline, baseline_at, channels, measured_at) \
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, $16)",
             )
             .bind(&rec.id)
             .bind(&rec.machine_id)
@@ -169,13 +172,14 @@ macro_rules! ingest_sql {
                     .as_ref()
                     .map(|c| serde_json::to_string(c).unwrap_or_default()),
             )
+            .bind(rec.measured_at)
             .execute(&mut **tx)
             .await?;
             sqlx::query(
                 "INSERT INTO diagnoses (id, record_id, machine_id, created_at, ea_estimate, \
                  ea_lower, ea_upper, alert_level, motion_state, body, spectrum, has_wear, \
-                 novelty_score, novelty_threshold, channel) \
-                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15)",
+                 novelty_score, novelty_threshold, channel, measured_at) \
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, $16)",
             )
             .bind(&d.id)
             .bind(&d.record_id)
@@ -192,6 +196,7 @@ macro_rules! ingest_sql {
             .bind(d.novelty_score)
             .bind(d.novelty_threshold)
             .bind(&d.channel)
+            .bind(d.measured_at)
             .execute(&mut **tx)
             .await?;
             sqlx::query(

@@ -1,0 +1,317 @@
+//! A machine's trend (issue 33 item 1): `GET /v1/machines/{id}/trend?series=&channel=` and the
+//! machine view's `trend_summary`. The series are read in measurement order (`measured_at`:
+//! the record's `recorded_at`, else its receive time) and fitted by the core's
+//! [`trend`](crate::trend) (Theil–Sen, Mann–Kendall, bootstrap intervals).
+
+use axum::extract::{Path, RawQuery, State};
+use axum::http::HeaderMap;
+use axum::response::Response;
+use serde::Deserialize;
+use serde_json::{Value, json};
+
+use super::AppState;
+use super::auth::Caller;
+use super::error::{ApiError, ApiResult};
+use super::http::{check_machine_id, json_with_etag};
+use crate::store::DiagnosisRow;
+use crate::time::rfc3339;
+use crate::trend::{self, Sample, Trend, TrendOptions};
+
+/// How many of a machine's latest diagnoses (by measurement time) a trend fits: 50 days at
+/// 4 records a day.
+pub const SERIES_POINTS: i64 = 200;
+
+const MS_PER_DAY: f64 = 86_400_000.0;
+
+/// Which series: `wear`, `novelty` or `finding:<kind>` (a finding's strength; `<kind>` as in
+/// a finding's `kind`, optionally `<kind>@<shaft>`).
+#[derive(Debug, Clone, PartialEq)]
+enum Series {
+    Wear,
+    Novelty,
+    Finding { kind: String, shaft: Option<String> },
+}
+
+impl Series {
+    fn parse(s: Option<&str>) -> ApiResult<Series> {
+        match s.unwrap_or("wear") {
+            "wear" => Ok(Series::Wear),
+            "novelty" => Ok(Series::Novelty),
+            f if f.starts_with("finding:") && f.len() > "finding:".len() && f.len() <= 200 => {
+                let name = &f["finding:".len()..];
+                let (kind, shaft) = match name.split_once('@') {
+                    Some((k, s)) => (k.to_string(), Some(s.to_string())),
+                    None => (name.to_string(), None),
+                };
+                Ok(Series::Finding { kind, shaft })
+            }
+            other => Err(ApiError::bad_request(
+                "invalid-query",
+                "Invalid query parameter",
+                format!(
+                    "`series` must be `wear`, `novelty` or `finding:<kind>` (a finding's kind, \
+                     e.g. `finding:gear-local-damage`, optionally `@<shaft>`), got `{other}`"
+                ),
+            )
+            .with("parameter", "series")),
+        }
+    }
+
+    fn name(&self) -> String {
+        match self {
+            Series::Wear => "wear".into(),
+            Series::Novelty => "novelty".into(),
+            Series::Finding { kind, shaft: None } => format!("finding:{kind}"),
+            Series::Finding {
+                kind,
+                shaft: Some(s),
+            } => format!("finding:{kind}@{s}"),
+        }
+    }
+
+    fn unit(&self) -> &'static str {
+        match self {
+            Series::Wear => "ea (reference lengths)",
+            Series::Novelty => "novelty score",
+            Series::Finding { .. } => "finding strength (RMS z of its evidence)",
+        }
+    }
+
+    /// Does a value need the diagnosis's body (a channel's or a finding's), or do the stored
+    /// columns hold it (the deciding channel's wear and novelty)?
+    fn needs_body(&self, channel: Option<&str>) -> bool {
+        channel.is_some() || matches!(self, Series::Finding { .. })
+    }
+}
+
+/// One point: `(measured_at ms, value, record id, diagnosis id)`; also the novelty threshold
+/// it was judged by.
+struct Point<'a> {
+    measured_at: i64,
+    value: f64,
+    row: &'a DiagnosisRow,
+    novelty_threshold: Option<f64>,
+}
+
+/// The part of a diagnosis body that describes `channel`: the `channels` entry of that name,
+/// or the body itself when its deciding channel is that one (a one-channel record).
+fn channel_view<'a>(body: &'a Value, channel: &str) -> Option<&'a Value> {
+    if let Some(cs) = body.get("channels").and_then(Value::as_array) {
+        return cs
+            .iter()
+            .find(|c| c.get("name").and_then(Value::as_str) == Some(channel));
+    }
+    (body.get("channel").and_then(Value::as_str) == Some(channel)).then_some(body)
+}
+
+/// The series' value in one channel's view of a diagnosis (`wear_degree`, `novelty`,
+/// `findings`), with the novelty threshold.
+fn value_in(view: &Value, series: &Series) -> Option<(f64, Option<f64>)> {
+    match series {
+        Series::Wear => view["wear_degree"]["estimate"].as_f64().map(|v| (v, None)),
+        Series::Novelty => view["novelty"]["score"]
+            .as_f64()
+            .map(|v| (v, view["novelty"]["threshold"].as_f64())),
+        Series::Finding { kind, shaft } => view["findings"]
+            .as_array()?
+            .iter()
+            .filter(|f| f["kind"].as_str() == Some(kind.as_str()))
+            .filter(|f| shaft.is_none() || f["shaft"].as_str() == shaft.as_deref())
+            .filter_map(|f| f["strength"].as_f64())
+            .reduce(f64::max)
+            .map(|v| (v, None)),
+    }
+}
+
+/// The points of a series in measurement order: a diagnosis without the value (no wear
+/// figure, no baseline, not that finding, not that channel) has no point.
+fn points<'a>(rows: &'a [DiagnosisRow], series: &Series, channel: Option<&str>) -> Vec<Point<'a>> {
+    rows.iter()
+        .filter_map(|d| {
+            let (value, novelty_threshold) = if series.needs_body(channel) {
+                let body: Value = serde_json::from_str(&d.body).ok()?;
+                let view = match channel {
+                    Some(c) => channel_view(&body, c)?,
+                    None => &body,
+                };
+                value_in(view, series)?
+            } else {
+                match series {
+                    Series::Wear => (d.has_wear.then_some(d.ea_estimate)?, None),
+                    _ => (d.novelty_score?, d.novelty_threshold),
+                }
+            };
+            Some(Point {
+                measured_at: d.measured_at,
+                value,
+                row: d,
+                novelty_threshold,
+            })
+        })
+        .collect()
+}
+
+/// The thresholds a series is judged by: the service's wear thresholds; for the novelty score
+/// the latest baseline threshold (warning) and twice it (alarm), as the alert policy does;
+/// none for a finding.
+fn thresholds(app: &AppState, series: &Series, pts: &[Point]) -> Option<(f64, f64)> {
+    match series {
+        Series::Wear => Some((
+            app.settings.thresholds.warning,
+            app.settings.thresholds.alarm,
+        )),
+        Series::Novelty => pts
+            .iter()
+            .rev()
+            .find_map(|p| p.novelty_threshold)
+            .map(|t| (t, 2.0 * t)),
+        Series::Finding { .. } => None,
+    }
+}
+
+/// Fit the points: times in days before the latest point.
+fn fit_points(pts: &[Point]) -> Option<Trend> {
+    let last = pts.iter().map(|p| p.measured_at).max()?;
+    let samples: Vec<Sample> = pts
+        .iter()
+        .map(|p| Sample {
+            t_days: (p.measured_at - last) as f64 / MS_PER_DAY,
+            value: p.value,
+        })
+        .collect();
+    trend::fit(&samples, &TrendOptions::default())
+}
+
+/// `{fit, thresholds, projection, verdict}` of a series' points.
+fn assess(pts: &[Point], limits: Option<(f64, f64)>) -> Value {
+    let t = fit_points(pts);
+    let last = pts.iter().map(|p| p.measured_at).max().unwrap_or(0);
+    let crossing = |threshold: f64| -> Value {
+        match t.as_ref().and_then(|t| t.crossing(threshold)) {
+            None => Value::Null,
+            Some(c) => json!({
+                "days": c.days,
+                "interval_90": c.interval_90,
+                // Beyond a century the date means nothing (and would overflow).
+                "at": (c.days <= 36_500.0)
+                    .then(|| rfc3339(last + (c.days * MS_PER_DAY).round() as i64)),
+            }),
+        }
+    };
+    let significant = t.as_ref().is_some_and(|t| t.fit.significant);
+    let projection = match limits {
+        Some((w, a)) if significant => json!({"warning": crossing(w), "alarm": crossing(a)}),
+        _ => Value::Null,
+    };
+    let names: Vec<(&str, f64)> = limits
+        .map(|(w, a)| vec![("warning", w), ("alarm", a)])
+        .unwrap_or_default();
+    let verdict = match &t {
+        None => format!("not enough points for a trend ({})", pts.len()),
+        Some(_) => trend::verdict(t.as_ref(), &names),
+    };
+    json!({
+        "fit": t.as_ref().map(|t| &t.fit),
+        "thresholds": limits.map(|(w, a)| json!({"warning": w, "alarm": a})),
+        "projection": projection,
+        "verdict": verdict,
+    })
+}
+
+/// The machine view's `trend_summary`: the wear series' `{series, verdict, fit, projection}`
+/// over `rows` (the latest diagnoses in measurement order).
+pub fn wear_summary(app: &AppState, rows: &[DiagnosisRow]) -> Value {
+    let pts = points(rows, &Series::Wear, None);
+    let mut a = assess(&pts, thresholds(app, &Series::Wear, &pts));
+    a["series"] = "wear".into();
+    if let Value::Object(m) = &mut a {
+        m.remove("thresholds");
+    }
+    a
+}
+
+/// The machine's wear `trend_summary` with a new diagnosis in it (not stored yet): the latest
+/// stored diagnoses by measurement time plus this one, for the record's webhook payloads.
+/// Null when the history cannot be read (the record is still stored; its payloads then lack
+/// the trend).
+pub async fn summary_with(app: &AppState, d: &DiagnosisRow) -> Value {
+    let mut rows = match app
+        .store
+        .recent_diagnoses(&d.machine_id, SERIES_POINTS)
+        .await
+    {
+        Ok(rows) => rows,
+        Err(e) => {
+            tracing::warn!(machine_id = %d.machine_id, error = %e, "trend for the webhook payload");
+            return Value::Null;
+        }
+    };
+    let at = rows.partition_point(|r| r.measured_at <= d.measured_at);
+    let mut row = d.clone();
+    (row.body, row.spectrum) = (String::new(), String::new());
+    rows.insert(at, row);
+    if rows.len() > SERIES_POINTS as usize {
+        rows.remove(0);
+    }
+    wear_summary(app, &rows)
+}
+
+#[derive(Debug, Default, Deserialize)]
+struct TrendQuery {
+    series: Option<String>,
+    channel: Option<String>,
+}
+
+/// `GET /v1/machines/{machine_id}/trend?series=wear|novelty|finding:<kind>&channel=`.
+pub async fn get_trend(
+    State(app): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+    RawQuery(query): RawQuery,
+    headers: HeaderMap,
+) -> ApiResult<Response> {
+    caller.require_read(&app)?;
+    check_machine_id(&id)?;
+    let q: TrendQuery =
+        serde_urlencoded::from_str(query.as_deref().unwrap_or("")).map_err(|e| {
+            ApiError::bad_request("invalid-query", "Invalid query parameter", e.to_string())
+                .with("parameter", "query")
+        })?;
+    let series = Series::parse(q.series.as_deref())?;
+    let channel = q.channel.as_deref().filter(|c| !c.is_empty());
+    if channel.is_some_and(|c| c.len() > 100) {
+        return Err(ApiError::bad_request(
+            "invalid-query",
+            "Invalid query parameter",
+            "`channel` is a channel name of at most 100 characters",
+        )
+        .with("parameter", "channel"));
+    }
+    if app.store.get_machine(&id).await?.is_none() {
+        return Err(super::read::unknown_machine(&id));
+    }
+    let rows = if series.needs_body(channel) {
+        app.store.series_diagnoses(&id, SERIES_POINTS).await?
+    } else {
+        app.store.recent_diagnoses(&id, SERIES_POINTS).await?
+    };
+    let pts = points(&rows, &series, channel);
+    let mut body = assess(&pts, thresholds(&app, &series, &pts));
+    body["machine_id"] = id.as_str().into();
+    body["series"] = series.name().into();
+    body["channel"] = channel.map_or(Value::Null, Value::from);
+    body["unit"] = series.unit().into();
+    body["points"] = pts
+        .iter()
+        .map(|p| {
+            json!({
+                "measured_at": rfc3339(p.measured_at),
+                "value": p.value,
+                "record_id": p.row.record_id,
+                "diagnosis_id": p.row.id,
+            })
+        })
+        .collect::<Vec<_>>()
+        .into();
+    Ok(json_with_etag(&headers, &body))
+}
