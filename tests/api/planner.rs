@@ -101,14 +101,14 @@ async fn the_planner_reads_the_fleet_by_urgency() {
         views["press-trend"]["latest"]
     );
     assert_eq!(level("press-ok"), "ok", "{}", views["press-ok"]["latest"]);
-    // With the trend API the rising machine has a projected crossing and comes third;
-    // without it, it is one of the rest (ordered by id, after press-ok).
-    let projected = views["press-trend"]["trend_summary"]["projection"].is_object();
-    let want = if projected {
-        ["press-alarm", "press-warning", "press-trend", "press-ok"]
-    } else {
-        ["press-alarm", "press-warning", "press-ok", "press-trend"]
-    };
+    // The rising machine has a projected crossing: third, before the ok one.
+    let projected = &views["press-trend"]["trend_summary"]["projection"];
+    assert!(
+        projected.is_object(),
+        "{}",
+        views["press-trend"]["trend_summary"]
+    );
+    let want = ["press-alarm", "press-warning", "press-trend", "press-ok"];
     let alerts = app.get("/v1/alerts?state=open").await;
     let alerts = if alerts.status() == 200 {
         Some(json(&alerts.bytes().await.unwrap()))
@@ -190,16 +190,13 @@ async fn the_planner_reads_the_fleet_by_urgency() {
             .is_none(),
         "{rows:?}"
     );
-    if projected {
-        let s = &views["press-trend"]["trend_summary"];
-        let days = s["projection"]["alarm"]["days"].as_f64().unwrap();
-        let verdict = row("press-trend")["verdict"].as_str().unwrap();
-        assert!(
-            verdict.starts_with(&format!("alarm in {} day", days.round())),
-            "{verdict} / {s}"
-        );
-        assert_eq!(row("press-trend")["tier"], "2", "{rows:?}");
-    }
+    let days = projected["alarm"]["days"].as_f64().unwrap();
+    let verdict = row("press-trend")["verdict"].as_str().unwrap();
+    assert!(
+        verdict.starts_with(&format!("alarm in {} day", days.round())),
+        "{verdict} / {projected}"
+    );
+    assert_eq!(row("press-trend")["tier"], "2", "{rows:?}");
 
     // The open alerts, as the API lists them (the panel is hidden without the alerts API).
     let listed = d
@@ -241,7 +238,7 @@ async fn the_planner_reads_the_fleet_by_urgency() {
     }
 
     urgency_rules_hold(&d).await;
-    deep_links_open_a_machine_and_a_record(&d, &app, &views, projected).await;
+    deep_links_open_a_machine_and_a_record(&d, &app, &views).await;
     d.cmd(reqwest::Method::DELETE, "", None).await;
     let _ = std::fs::remove_dir_all(&profile);
 }
@@ -281,14 +278,13 @@ async fn urgency_rules_hold(d: &crate::browser::Driver) {
     );
 }
 
-/// `#/machines/{id}` opened as a URL: the page with its wear plot on a time axis (and, with the
-/// trend API, the fitted line and the projected crossings); its latest record opened from it;
+/// `#/machines/{id}` opened as a URL: the page with its wear plot on a time axis, the fitted
+/// line and the projected crossings; its latest record opened from it;
 /// `#/records/{id}` opened as a URL.
 async fn deep_links_open_a_machine_and_a_record(
     d: &crate::browser::Driver,
     app: &TestApp,
     views: &Value,
-    projected: bool,
 ) {
     d.cmd(
         reqwest::Method::POST,
@@ -312,22 +308,22 @@ async fn deep_links_open_a_machine_and_a_record(
         .await;
     assert_eq!(page["overview"], true, "{page}");
     assert!(page["ticks"].as_u64().unwrap() >= 2, "{page}");
-    if projected {
-        let page = d
-            .wait_for(
-                "the projection",
-                "return document.querySelectorAll('#projection .proj-point').length === 8 && \
-                   document.querySelectorAll('#projection .fit-line').length === 1 \
-                 ? [...document.querySelectorAll('#projection .crossing-label')].map(c => c.dataset.name) : null",
-            )
-            .await;
-        assert!(page.as_array().unwrap().contains(&json!("alarm")), "{page}");
-    } else {
-        assert_eq!(
-            page["projection"], false,
-            "no trend API, no projection: {page}"
-        );
-    }
+    let crossings = d
+        .wait_for(
+            "the projection",
+            "return document.querySelectorAll('#projection .proj-point').length === 8 && \
+               document.querySelectorAll('#projection .fit-line').length === 1 \
+             ? [...document.querySelectorAll('#projection .crossing-label')].map(c => c.dataset.name) : null",
+        )
+        .await;
+    assert_eq!(crossings, json!(["warning", "alarm"]), "{crossings}");
+    assert!(
+        page["verdict"]
+            .as_str()
+            .unwrap()
+            .starts_with("Wear trend: alarm in "),
+        "{page}"
+    );
     let png = d.cmd(reqwest::Method::GET, "/screenshot", None).await;
     save_png(&png, "gearwear-planner-machine.png");
     projection_draws_the_documented_answer(d).await;
