@@ -88,7 +88,10 @@ function renderProjection(tr) {
   drawFit(svg, tr, pts, cross, sx, sy, t1);
   for (const c of cross) drawCrossing(svg, c, sx, sy, t1);
   for (const p of pts) {
-    const parent = p.record_id ? el("a", { href: "#/records/" + encodeURIComponent(p.record_id) }, svg) : svg;
+    // Each point opens its record: by diagnosis id when the answer has it, else by record id.
+    const href = p.diagnosis_id ? "#/diagnoses/" + encodeURIComponent(p.diagnosis_id)
+      : p.record_id ? "#/records/" + encodeURIComponent(p.record_id) : null;
+    const parent = href ? el("a", { href }, svg) : svg;
     const c = el("circle", { cx: sx(p.t), cy: sy(p.value), r: 3, fill: "#1d4ed8", class: "proj-point", "data-t": p.measured_at }, parent);
     tooltip(c, "measured " + when(p.measured_at) + ": ea " + p.value.toFixed(3) + (p.record_id ? " — open the record" : ""));
   }
