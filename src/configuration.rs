@@ -27,6 +27,8 @@ pub struct Settings {
     pub log_json: bool,
     pub limits: Limits,
     pub thresholds: Thresholds,
+    /// Alert episodes: open after N records at warning, close after M below (defaults 2, 3).
+    pub alerts: EpisodePolicy,
     pub webhooks: WebhookSettings,
     /// Raw samples are kept this long (0: never stored); metadata, features and diagnoses
     /// are kept forever.
@@ -53,6 +55,9 @@ pub struct Limits {
 
 /// The alert policy's wear-degree thresholds (in the core, with the policy).
 pub use crate::assessment::Thresholds;
+
+/// The alert episodes' delays and hysteresis (in the core, with the state machine).
+pub use crate::assessment::episodes::EpisodePolicy;
 
 /// Webhook delivery: retries with exponential back-off, `base · 2^(attempt−1)` capped at
 /// `max_backoff`, up to `max_attempts`.
@@ -84,6 +89,7 @@ impl Default for Settings {
                 request_timeout: Duration::from_secs(15),
             },
             thresholds: Thresholds::default(),
+            alerts: EpisodePolicy::default(),
             webhooks: WebhookSettings {
                 max_attempts: 10,
                 base_backoff: Duration::from_secs(2),

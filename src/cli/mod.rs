@@ -11,6 +11,7 @@
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
+pub mod alerts;
 pub mod baseline;
 pub mod calibrate;
 pub mod common;
@@ -60,6 +61,8 @@ pub enum Command {
     /// A machine's configuration in the service's database: its gearbox, input-shaft rate,
     /// channels.
     Machine(machine::MachineArgs),
+    /// The service's alerts in its database: list them, acknowledge one with a note.
+    Alerts(alerts::AlertsArgs),
     /// Simulate the signature table for diagnosis (ea × Ω1 × seeds).
     Precompute(diagnose::PrecomputeArgs),
     /// Estimate the wear degree from an accelerometer record.
@@ -82,6 +85,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Serve(a) => crate::service::cli::serve_cmd(a),
         Command::Keys(a) => crate::service::cli::keys_cmd(a),
         Command::Machine(a) => machine::run(a),
+        Command::Alerts(a) => alerts::run(a),
         Command::Precompute(a) => diagnose::precompute_cmd(a),
         Command::Diagnose(a) => diagnose::diagnose_cmd(a),
         Command::Calibrate(a) => calibrate::calibrate_cmd(a),

@@ -10,7 +10,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 
 use super::{AppState, check_exposure, serve};
-use crate::configuration::{Settings, Thresholds};
+use crate::configuration::{EpisodePolicy, Settings, Thresholds};
 use crate::database::DatabaseArg;
 use crate::keys::{self, Scope};
 use crate::store::{self, KeyRow, now_ms};
@@ -74,6 +74,17 @@ pub struct ServeArgs {
     /// Wear degree (ea) at which a machine turns `alarm`.
     #[arg(long, default_value_t = Thresholds::default().alarm)]
     pub alarm_ea: f64,
+    /// Consecutive records at warning or above (alarm) that open (escalate) a machine's alert:
+    /// one noisy record opens none.
+    #[arg(long, env = "GEARWEAR_ALERT_OPEN_AFTER", default_value_t = EpisodePolicy::default().open_after)]
+    pub alert_open_after: u32,
+    /// Consecutive records below the close threshold that close a machine's alert.
+    #[arg(long, env = "GEARWEAR_ALERT_CLOSE_AFTER", default_value_t = EpisodePolicy::default().close_after)]
+    pub alert_close_after: u32,
+    /// Severity under which a record counts towards closing an alert, as a fraction of the
+    /// warning severity (1 = no hysteresis; docs/service.md#alerts).
+    #[arg(long, env = "GEARWEAR_ALERT_CLOSE_BELOW", default_value_t = EpisodePolicy::default().close_below)]
+    pub alert_close_below: f64,
 }
 
 impl ServeArgs {
@@ -119,6 +130,20 @@ impl ServeArgs {
         }
         s.thresholds.warning = self.warning_ea;
         s.thresholds.alarm = self.alarm_ea;
+        if self.alert_open_after == 0 || self.alert_close_after == 0 {
+            bail!("--alert-open-after and --alert-close-after must be at least 1 record");
+        }
+        if !(self.alert_close_below > 0.0 && self.alert_close_below <= 1.0) {
+            bail!(
+                "--alert-close-below must be in (0, 1], got {}",
+                self.alert_close_below
+            );
+        }
+        s.alerts = EpisodePolicy {
+            open_after: self.alert_open_after,
+            close_after: self.alert_close_after,
+            close_below: self.alert_close_below,
+        };
         Ok(s)
     }
 }
@@ -137,7 +162,7 @@ pub struct KeysArgs {
 pub enum KeysCommand {
     /// Create a key and print it once (only its hash is stored).
     Create {
-        /// Comma-separated scopes: ingest, read, admin.
+        /// Comma-separated scopes: ingest, read, acknowledge (alerts; read does not give it), admin.
         #[arg(long, default_value = "ingest,read")]
         scope: String,
         /// A label to recognise the key by.
@@ -184,7 +209,7 @@ pub fn keys_cmd(a: KeysArgs) -> Result<()> {
         match a.command {
             KeysCommand::Create { scope, label } => {
                 let scopes = Scope::parse_list(&scope).map_err(|w| {
-                    anyhow::anyhow!("unknown scope `{w}`: use ingest, read or admin")
+                    anyhow::anyhow!("unknown scope `{w}`: use ingest, read, acknowledge or admin")
                 })?;
                 if scopes.is_empty() {
                     bail!("give at least one scope: --scope ingest,read");

@@ -21,6 +21,7 @@ use tokio::net::TcpListener;
 use tokio::sync::{Notify, watch};
 use tower_http::trace::TraceLayer;
 
+pub mod alerts;
 pub mod auth;
 pub mod calibration;
 pub mod cli;
@@ -147,6 +148,12 @@ pub fn router(state: AppState) -> Router {
                 .delete(calibration::delete),
         )
         .route("/v1/diagnoses/{diagnosis_id}", get(read::get_diagnosis))
+        .route("/v1/alerts", get(alerts::list))
+        .route("/v1/alerts/{alert_id}", get(alerts::get))
+        .route(
+            "/v1/alerts/{alert_id}/acknowledge",
+            post(alerts::acknowledge),
+        )
         .route("/v1/webhooks", post(webhooks::create).get(webhooks::list))
         .route("/v1/webhooks/{webhook_id}", delete(webhooks::delete))
         .route(
@@ -198,6 +205,9 @@ pub const ROUTES: &[(&str, &str)] = &[
     ("GET", "/v1/machines/{machine_id}/calibration"),
     ("DELETE", "/v1/machines/{machine_id}/calibration"),
     ("GET", "/v1/diagnoses/{diagnosis_id}"),
+    ("GET", "/v1/alerts"),
+    ("GET", "/v1/alerts/{alert_id}"),
+    ("POST", "/v1/alerts/{alert_id}/acknowledge"),
     ("POST", "/v1/webhooks"),
     ("GET", "/v1/webhooks"),
     ("DELETE", "/v1/webhooks/{webhook_id}"),

@@ -31,8 +31,9 @@ use crate::assessment::{
 use crate::gearbox::Gearbox;
 use crate::keys::Scope;
 use crate::store::{
-    DiagnosisRow, IdemRow, Ingest, MachineRow, NewRecord, StoreError, new_id, now_ms,
+    AlertInput, DiagnosisRow, IdemRow, Ingest, MachineRow, NewRecord, StoreError, new_id, now_ms,
 };
+use crate::time::parse_rfc3339;
 use crate::units::MachineUnits;
 
 /// The handler.
@@ -142,6 +143,15 @@ async fn ingest(
         idempotency: idem.row(&response_text),
         event_extras: event_extras(&body),
         registered_only: app.settings.require_registered_machines,
+        alert: Some(AlertInput {
+            severity: assessment.severity(&app.settings.thresholds),
+            measured_at: dec
+                .recorded_at
+                .as_deref()
+                .and_then(parse_rfc3339)
+                .unwrap_or(ids.now),
+            policy: app.settings.alerts,
+        }),
     };
     // The webhook payloads carry the machine's wear trend with this record in it.
     let trend = super::trend::summary_with(app, &ing.diagnosis).await;

@@ -28,12 +28,16 @@ use crate::keys::{self, Scope};
 use crate::store::{AttemptRow, DeliveryRow, Outcome, WebhookRow, new_id, now_ms};
 use crate::time::rfc3339;
 
-/// Events a subscription may ask for: a record's diagnosis was stored, a machine's alert level
-/// rose to warning or alarm, a machine was deleted (`DELETE /v1/machines/{id}`).
-pub const EVENTS: [&str; 3] = [
+/// Events a subscription may ask for: a record's diagnosis was stored; a machine's alert opened
+/// or escalated (`wear.threshold_crossed`, the older name, once per transition); a machine was
+/// deleted (`DELETE /v1/machines/{id}`); an alert opened, was acknowledged, closed.
+pub const EVENTS: [&str; 6] = [
     "diagnosis.created",
     "wear.threshold_crossed",
     "machine.deleted",
+    "alert.opened",
+    "alert.acknowledged",
+    "alert.closed",
 ];
 
 #[derive(Debug, Deserialize)]

@@ -130,6 +130,13 @@ const TABLE: &[(&str, &str, Need)] = &[
         "/v1/webhooks/{webhook_id}/deliveries",
         Need::Key(Scope::Admin),
     ),
+    ("GET", "/v1/alerts", Need::Key(Scope::Read)),
+    ("GET", "/v1/alerts/{alert_id}", Need::Key(Scope::Read)),
+    (
+        "POST",
+        "/v1/alerts/{alert_id}/acknowledge",
+        Need::Key(Scope::Acknowledge),
+    ),
     ("GET", "/healthz", Need::Public),
     ("GET", "/readyz", Need::Public),
     ("GET", "/metrics", Need::Public),
@@ -228,6 +235,7 @@ impl Fixture {
             .replace("{webhook_id}", &self.webhook)
             .replace("{record_id}", &self.record)
             .replace("{gearbox_id}", "sec-gearbox")
+            .replace("{alert_id}", "no-such-alert")
     }
 }
 
@@ -270,6 +278,10 @@ fn request(
             .put(url)
             .header("content-type", "application/toml")
             .body(include_str!("../../configs/gearboxes/spur-pair.toml")),
+        ("POST", "/v1/alerts/{alert_id}/acknowledge") => app
+            .client
+            .post(url)
+            .json(&json!({"note": "checked the gearbox"})),
         ("GET", _) => app.client.get(url),
         ("DELETE", _) => app.client.delete(url),
         (m, t) => panic!("no request written for {m} {t}: add one to `request`"),
@@ -424,9 +436,15 @@ async fn every_route_needs_a_key_of_its_scope(b: Backend) {
     };
     let fx = Fixture::new(&app).await;
     let bad = bad_credentials(&app).await;
+    // A planner's key: acknowledges alerts, nothing else (not even reads).
+    let (_, ack_key) =
+        gearwear::service::cli::create_key(app.store.as_ref(), &[Scope::Acknowledge], "planner")
+            .await
+            .unwrap();
     let keys = [
         ("ingest key", app.ingest_key.clone(), vec![Scope::Ingest]),
         ("read key", app.read_key.clone(), vec![Scope::Read]),
+        ("acknowledge key", ack_key, vec![Scope::Acknowledge]),
         ("admin key", app.admin_key.clone(), vec![Scope::Admin]),
     ];
     let before = snapshot(&app, &fx.machine).await;

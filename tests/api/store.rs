@@ -305,6 +305,7 @@ pub fn ingest(machine: &str, idem: Option<&str>, t: i64) -> Ingest {
         }),
         event_extras: Default::default(),
         registered_only: false,
+        alert: None,
     }
 }
 

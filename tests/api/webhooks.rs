@@ -89,10 +89,12 @@ pub async fn wait_for<F: Fn() -> bool>(what: &str, f: F) {
 }
 
 async fn signed_delivery_with_retries(b: Backend) {
-    // Thresholds at 0 so the first record also crosses into `alarm`.
+    // Thresholds at 0 so the first record also crosses into `alarm`, and an alert that opens
+    // on one record, so that `wear.threshold_crossed` goes out with it.
     let Some(app) = spawn_app(b, |s| {
         s.thresholds.warning = 0.0;
         s.thresholds.alarm = 0.0;
+        s.alerts.open_after = 1;
     })
     .await
     else {
@@ -215,8 +217,8 @@ async fn deliveries_survive_a_restart(b: Backend) {
     tokio::time::sleep(std::time::Duration::from_millis(300)).await;
     app.restart(|_| {}).await;
     let (rx, _, _t) = start_receiver(0, port).await;
-    // The record's events (`diagnosis.created`, and `wear.threshold_crossed` when its wear
-    // crosses a threshold) are both pending across the restart; they may arrive in either order.
+    // The record's events (`diagnosis.created`, and `wear.threshold_crossed` when an alert
+    // opens) are both pending across the restart; they may arrive in either order.
     let created = || {
         rx.got.lock().unwrap().iter().find_map(|(_, body)| {
             let p: Value = serde_json::from_slice(body).unwrap();

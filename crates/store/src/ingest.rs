@@ -4,7 +4,8 @@
 use async_trait::async_trait;
 
 use super::StoreResult;
-use super::diagnoses::{DiagnosisRow, level_rank, novelty_json, wear_json};
+use super::alerts::AlertInput;
+use super::diagnoses::{DiagnosisRow, novelty_json, wear_json};
 
 /// An accepted record's metadata, features and (optionally) raw samples.
 #[derive(Debug, Clone)]
@@ -58,13 +59,14 @@ pub struct Ingest {
     /// and store nothing; when false a record of an unknown machine creates it. Checked in
     /// the transaction, so a machine deleted meanwhile is not brought back.
     pub registered_only: bool,
+    /// The record's step of its machine's alert episode (`None`: the episode is left as it
+    /// is — the store's own tests).
+    pub alert: Option<AlertInput>,
 }
 
-/// The webhook events an ingest raises, given the machine's previous alert level:
-/// `diagnosis.created` always, `wear.threshold_crossed` when the level rises to warning or
-/// alarm. Payloads are JSON texts: the diagnosis row's members and the ingest's
-/// [`event_extras`](Ingest::event_extras).
-pub fn ingest_events(prev_level: &str, ing: &Ingest, event_id: &str) -> Vec<(String, String)> {
+/// The payload of a record's webhook events: the diagnosis row's members and the ingest's
+/// [`event_extras`](Ingest::event_extras) (`event` is set by each event).
+pub fn diagnosis_payload(ing: &Ingest, event_id: &str) -> serde_json::Value {
     let d = &ing.diagnosis;
     let mut base = serde_json::json!({
         "event_id": event_id,
@@ -84,17 +86,16 @@ pub fn ingest_events(prev_level: &str, ing: &Ingest, event_id: &str) -> Vec<(Str
             m.entry(k.clone()).or_insert_with(|| v.clone());
         }
     }
-    let mut out = Vec::new();
-    let mut created = base.clone();
+    base
+}
+
+/// The webhook events an ingest raises besides its alert episode's
+/// ([`crate::alerts::transition_events`]): `diagnosis.created`, always. Payloads are JSON
+/// texts ([`diagnosis_payload`]).
+pub fn ingest_events(ing: &Ingest, event_id: &str) -> Vec<(String, String)> {
+    let mut created = diagnosis_payload(ing, event_id);
     created["event"] = "diagnosis.created".into();
-    out.push(("diagnosis.created".to_string(), created.to_string()));
-    if level_rank(&d.alert_level) > level_rank(prev_level) && level_rank(&d.alert_level) >= 2 {
-        let mut crossed = base;
-        crossed["event"] = "wear.threshold_crossed".into();
-        crossed["previous_alert_level"] = prev_level.into();
-        out.push(("wear.threshold_crossed".to_string(), crossed.to_string()));
-    }
-    out
+    vec![("diagnosis.created".to_string(), created.to_string())]
 }
 
 /// Accepted records and the answers to idempotency keys.
@@ -115,6 +116,7 @@ pub trait IngestStore: Send + Sync {
 /// run the same text.
 macro_rules! ingest_sql {
     ($store:ident, $db:ty) => {
+        use super::alerts::step_in;
         use super::webhooks::queue_events;
         use super::$store;
         use sqlx::Row;
@@ -123,7 +125,7 @@ macro_rules! ingest_sql {
         /// Every write of one accepted record, inside the caller's transaction.
         async fn ingest_in(tx: &mut sqlx::Transaction<'_, $db>, ing: &Ingest) -> StoreResult<()> {
             let (rec, d) = (&ing.record, &ing.diagnosis);
-            let prev = lock_machine(tx, ing).await?;
+            lock_machine(tx, ing).await?;
             if let Some(i) = &ing.idempotency {
                 let r = sqlx::query(
                     "INSERT INTO idempotency_keys \
@@ -209,7 +211,13 @@ macro_rules! ingest_sql {
             .bind(&d.alert_level)
             .execute(&mut **tx)
             .await?;
-            let events = ingest_events(&prev, ing, &new_id());
+            let event_id = new_id();
+            let mut events = ingest_events(ing, &event_id);
+            if let Some(a) = &ing.alert {
+                let payload = diagnosis_payload(ing, &event_id);
+                let step = step_in(tx, &rec.machine_id, &rec.id, a, &payload, rec.received_at);
+                events.extend(step.await?);
+            }
             queue_events(tx, &events, rec.received_at).await
         }
 

@@ -11,8 +11,10 @@ use super::StoreResult;
 pub enum Scope {
     /// POST records.
     Ingest,
-    /// GET machines, diagnoses, the dashboard.
+    /// GET machines, diagnoses, alerts, the dashboard.
     Read,
+    /// Acknowledge alerts (`POST /v1/alerts/{id}/acknowledge`); `read` does not give it.
+    Acknowledge,
     /// Manage webhooks (and everything else).
     Admin,
 }
@@ -22,6 +24,7 @@ impl Scope {
         match self {
             Scope::Ingest => "ingest",
             Scope::Read => "read",
+            Scope::Acknowledge => "acknowledge",
             Scope::Admin => "admin",
         }
     }
@@ -30,6 +33,7 @@ impl Scope {
         match s.trim() {
             "ingest" => Some(Scope::Ingest),
             "read" => Some(Scope::Read),
+            "acknowledge" => Some(Scope::Acknowledge),
             "admin" => Some(Scope::Admin),
             _ => None,
         }

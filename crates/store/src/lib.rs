@@ -9,7 +9,7 @@
 //! its SQL: [`keys`], [`ingest`] (the record path's writes and idempotent answers),
 //! [`diagnoses`], [`machines`], [`webhooks`] (subscriptions and deliveries), [`retention`]
 //! (purges), [`calibration`], [`gearboxes`] (descriptions and their table jobs) and
-//! [`baselines`]. Both backends run the same SQL text (`$1`-style parameters work on both): each
+//! [`baselines`], [`alerts`] (alert episodes and their audit trail). Both backends run the same SQL text (`$1`-style parameters work on both): each
 //! resource module has one small macro (`keys_sql!`, …) that the backend modules instantiate
 //! with their own pool type, with per-backend migrations under `migrations/{sqlite,postgres}`;
 //! the integration tests run the same API tests against both. The only differences live in the
@@ -47,6 +47,9 @@ macro_rules! backend {
         mod keys {
             $crate::keys::keys_sql!($store, $db);
         }
+        mod alerts {
+            $crate::alerts::alerts_sql!($store, $db);
+        }
         mod ingest {
             $crate::ingest::ingest_sql!($store, $db);
         }
@@ -75,6 +78,7 @@ macro_rules! backend {
 }
 pub(crate) use backend;
 
+pub mod alerts;
 pub mod baselines;
 pub mod calibration;
 pub mod diagnoses;
@@ -89,11 +93,15 @@ pub mod sqlite;
 pub mod time;
 pub mod webhooks;
 
+pub use alerts::{
+    Acknowledged, AlertEventRow, AlertFilter, AlertInput, AlertRow, AlertStore, alert_event_json,
+    alert_json, transition_events,
+};
 pub use baselines::{BaselineRecord, BaselineStore};
 pub use calibration::{CalibrationRow, CalibrationStore};
 pub use diagnoses::{DiagnosisRow, DiagnosisStore, LEVELS, level_rank, novelty_json, wear_json};
 pub use gearboxes::{GearboxRow, GearboxStore, PutOutcome};
-pub use ingest::{IdemRow, Ingest, IngestStore, NewRecord, ingest_events};
+pub use ingest::{IdemRow, Ingest, IngestStore, NewRecord, diagnosis_payload, ingest_events};
 pub use keys::{KeyRow, KeyStore};
 pub use machines::{
     MachineConfig, MachineDeletion, MachineRow, MachineStore, machine_deleted_event,
@@ -175,6 +183,7 @@ pub(crate) fn is_unique_violation(e: &sqlx::Error) -> bool {
 #[async_trait]
 pub trait Store:
     KeyStore
+    + AlertStore
     + IngestStore
     + DiagnosisStore
     + MachineStore

@@ -237,6 +237,18 @@ macro_rules! machines_sql {
                     .await?
                     .rows_affected()
                     > 0;
+                // Its alert episodes, their audit trail and counts go with it.
+                deleted(
+                    "alert_events WHERE alert_id IN (SELECT id FROM alerts WHERE machine_id = $1)",
+                )
+                .execute(&mut *tx)
+                .await?;
+                deleted("alerts WHERE machine_id = $1")
+                    .execute(&mut *tx)
+                    .await?;
+                deleted("alert_trackers WHERE machine_id = $1")
+                    .execute(&mut *tx)
+                    .await?;
                 deleted("machines WHERE id = $1").execute(&mut *tx).await?;
                 if alert_level.is_none() && !calibration {
                     // Nothing was there: nothing to announce (the transaction wrote nothing).

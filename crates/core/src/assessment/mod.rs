@@ -24,6 +24,7 @@
 pub mod alert;
 pub mod condition;
 pub mod diagnoser;
+pub mod episodes;
 
 use std::collections::BTreeMap;
 
