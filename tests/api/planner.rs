@@ -109,12 +109,38 @@ async fn the_planner_reads_the_fleet_by_urgency() {
         views["press-trend"]["trend_summary"]
     );
     let want = ["press-alarm", "press-warning", "press-trend", "press-ok"];
-    let alerts = app.get("/v1/alerts?state=open").await;
-    let alerts = if alerts.status() == 200 {
-        Some(json(&alerts.bytes().await.unwrap()))
-    } else {
-        None
+    // Both levelled machines have an open alert (their 4 records pass the on-delay); the
+    // warning one is acknowledged with a note.
+    let alerts = json(
+        &app.get("/v1/alerts?state=open")
+            .await
+            .bytes()
+            .await
+            .unwrap(),
+    );
+    let alert_of = |m: &str| {
+        alerts["alerts"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|a| a["machine_id"] == m)
+            .unwrap_or_else(|| panic!("an open alert for {m}: {alerts}"))
+            .clone()
     };
+    assert_eq!(alert_of("press-alarm")["level"], "alarm", "{alerts}");
+    let warning_alert = alert_of("press-warning")["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let r = app
+        .client
+        .post(app.url(&format!("/v1/alerts/{warning_alert}/acknowledge")))
+        .bearer_auth(&app.admin_key)
+        .json(&json!({"note": "lubricated, re-check Friday"}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200, "{}", r.text().await.unwrap());
 
     let Some((d, profile)) = start_driver().await else {
         return;
@@ -198,44 +224,48 @@ async fn the_planner_reads_the_fleet_by_urgency() {
     );
     assert_eq!(row("press-trend")["tier"], "2", "{rows:?}");
 
-    // The open alerts, as the API lists them (the panel is hidden without the alerts API).
+    // The open alerts as the API lists them, the alarm first, the acknowledged one with its note.
     let listed = d
         .wait_for(
-            "the open alerts panel",
-            "const box = document.getElementById('alerts-box'); \
-             return {hidden: box.hidden, ids: [...document.querySelectorAll('#alerts li')].map(li => li.dataset.id), \
-                     machines: [...document.querySelectorAll('#alerts li')].map(li => li.dataset.machine), \
-                     words: [...document.querySelectorAll('#alerts li .state .word')].map(w => w.textContent)}",
+            "the open alerts, one acknowledged",
+            "const lis = [...document.querySelectorAll('#alerts li')]; \
+             return !document.getElementById('alerts-box').hidden && lis.some(li => li.dataset.state === 'acknowledged') \
+               ? lis.map(li => ({id: li.dataset.id, machine: li.dataset.machine, word: li.querySelector('.state .word').textContent, \
+                                 ack: li.querySelector('.ack').textContent, record: li.querySelector('a.record-link')?.getAttribute('href')})) \
+               : null",
         )
         .await;
-    match &alerts {
-        None => assert_eq!(listed["hidden"], true, "no alerts API, no panel: {listed}"),
-        Some(a) => {
-            let mut api_ids: Vec<&str> = a["alerts"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|x| x["id"].as_str().unwrap())
-                .collect();
-            let mut shown: Vec<&str> = listed["ids"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|x| x.as_str().unwrap())
-                .collect();
-            api_ids.sort();
-            shown.sort();
-            assert_eq!(shown, api_ids, "{listed} / {a}");
-            assert!(
-                listed["machines"]
-                    .as_array()
-                    .unwrap()
-                    .contains(&json!("press-alarm")),
-                "{listed}"
-            );
-            assert_eq!(listed["words"][0], "alarm", "the alarm first: {listed}");
-        }
-    }
+    let listed = listed.as_array().unwrap();
+    let shown: Vec<&str> = listed
+        .iter()
+        .map(|a| a["machine"].as_str().unwrap())
+        .collect();
+    assert_eq!(shown, ["press-alarm", "press-warning"], "{listed:?}");
+    assert_eq!(listed[0]["word"], "alarm", "{listed:?}");
+    assert_eq!(listed[0]["id"], alert_of("press-alarm")["id"], "{listed:?}");
+    assert_eq!(listed[0]["ack"], "not acknowledged", "{listed:?}");
+    assert_eq!(
+        listed[0]["record"],
+        format!(
+            "#/records/{}",
+            alert_of("press-alarm")["record_id"].as_str().unwrap()
+        ),
+        "{listed:?}"
+    );
+    assert_eq!(listed[1]["word"], "warning", "{listed:?}");
+    let ack = listed[1]["ack"].as_str().unwrap();
+    assert!(
+        ack.starts_with("acknowledged by ") && ack.ends_with(": lubricated, re-check Friday"),
+        "{ack}"
+    );
+    let note = d
+        .script("return document.querySelector('#fleet-rows tr[data-id=\"press-warning\"] .alert-note').textContent")
+        .await;
+    assert!(
+        note.as_str().unwrap().starts_with("alert open since ")
+            && note.as_str().unwrap().ends_with(", acknowledged"),
+        "{note}"
+    );
 
     urgency_rules_hold(&d).await;
     deep_links_open_a_machine_and_a_record(&d, &app, &views).await;

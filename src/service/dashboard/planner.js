@@ -153,8 +153,8 @@ function fleetRow(tb, m, u, view) {
   const st = h("td", { class: "state-cell" }, tr);
   stateTag(u.level, st).title = levelHelp(u.level, m.record_count);
   if (u.alert) {
-    h("div", { class: "muted alert-note" }, st, (u.alert.state === "acknowledged" ? "acknowledged" : "alert open") +
-      " since " + when(u.alert.opened_at));
+    h("div", { class: "muted alert-note" }, st, "alert open since " + when(u.alert.opened_at) +
+      (u.alert.state === "acknowledged" ? ", acknowledged" : ", not acknowledged"));
   }
   h("a", { href: machineHref(m.id), class: "machine-link" }, h("td", {}, tr), m.id);
   const l = view && view.latest;
