@@ -36,6 +36,8 @@ pub struct Settings {
     /// Stored answers to `Idempotency-Key`s are kept this long (default 7 days): a client
     /// retrying within it gets the original answer, later the key is forgotten.
     pub idempotency_retention: Duration,
+    /// MQTT ingest (`--mqtt-url`): off when `None`.
+    pub mqtt: Option<crate::service::mqtt::MqttSettings>,
 }
 
 /// Request limits. Each refusal is a problem+json naming the limit.
@@ -99,6 +101,7 @@ impl Default for Settings {
             },
             raw_retention: Duration::from_secs(30 * 24 * 3600),
             idempotency_retention: Duration::from_secs(7 * 24 * 3600),
+            mqtt: None,
         }
     }
 }

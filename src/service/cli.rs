@@ -71,6 +71,25 @@ pub struct ServeArgs {
     /// Wear degree (ea) at which a machine turns `warning`.
     #[arg(long, default_value_t = Thresholds::default().warning)]
     pub warning_ea: f64,
+    /// Take records from an MQTT broker too: `mqtt://[user[:password]@]host[:port]` (plain
+    /// TCP). Each message on --mqtt-topic goes through the record endpoint's path.
+    #[arg(long, env = "GEARWEAR_MQTT_URL")]
+    pub mqtt_url: Option<String>,
+    /// The topic filter to subscribe to (QoS 1); its one `+` level is the machine id.
+    #[arg(long, default_value = "plant/+/vibration", env = "GEARWEAR_MQTT_TOPIC")]
+    pub mqtt_topic: String,
+    /// The client id of the broker session (persistent: records published while the service
+    /// is down wait at the broker). One per replica; replicas share a topic with
+    /// `$share/GROUP/FILTER`.
+    #[arg(long, default_value = "gearwear", env = "GEARWEAR_MQTT_CLIENT_ID")]
+    pub mqtt_client_id: String,
+    /// Where a refused payload's problem (JSON) is published.
+    #[arg(
+        long,
+        default_value = "gearwear/errors",
+        env = "GEARWEAR_MQTT_ERROR_TOPIC"
+    )]
+    pub mqtt_error_topic: String,
     /// Wear degree (ea) at which a machine turns `alarm`.
     #[arg(long, default_value_t = Thresholds::default().alarm)]
     pub alarm_ea: f64,
@@ -144,6 +163,17 @@ impl ServeArgs {
             close_after: self.alert_close_after,
             close_below: self.alert_close_below,
         };
+        if let Some(url) = &self.mqtt_url {
+            s.mqtt = Some(
+                super::mqtt::MqttSettings::parse(
+                    url,
+                    &self.mqtt_topic,
+                    &self.mqtt_client_id,
+                    &self.mqtt_error_topic,
+                )
+                .map_err(anyhow::Error::msg)?,
+            );
+        }
         Ok(s)
     }
 }

@@ -30,6 +30,8 @@ pub struct Metrics {
     deliveries: Mutex<BTreeMap<String, u64>>,
     /// CPU seconds the record path spent in each stage, and how many times it ran.
     stages: Mutex<BTreeMap<&'static str, (f64, u64)>>,
+    /// MQTT ingest's connection and messages.
+    pub mqtt: super::mqtt::MqttMetrics,
 }
 
 /// CPU time of the calling thread, in seconds (`CLOCK_THREAD_CPUTIME_ID`): what a stage of
@@ -249,6 +251,7 @@ impl Metrics {
         for (s, (_, n)) in stages.iter() {
             let _ = writeln!(o, "gearwear_record_stage_runs_total{{stage=\"{s}\"}} {n}");
         }
+        self.mqtt.render(&mut o);
         o
     }
 }

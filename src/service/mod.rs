@@ -33,6 +33,7 @@ pub mod http;
 pub mod lifecycle;
 pub mod machines;
 pub mod metrics;
+pub mod mqtt;
 pub mod read;
 pub mod records;
 pub mod signatures;
@@ -300,6 +301,11 @@ pub async fn serve(
     let (stop_tx, stop_rx) = watch::channel(false);
     let worker = tokio::spawn(webhooks::worker(state.clone(), stop_rx.clone()));
     let jobs = tokio::spawn(gearboxes::worker(state.clone(), stop_rx.clone()));
+    let mqtt = state
+        .settings
+        .mqtt
+        .clone()
+        .map(|m| tokio::spawn(mqtt::run(state.clone(), m, stop_rx.clone())));
     let retention = tokio::spawn(retention_task(state.clone(), stop_rx));
     let app = router(state.clone());
     let res = axum::serve(listener, app)
@@ -309,6 +315,9 @@ pub async fn serve(
     let _ = worker.await;
     let _ = jobs.await;
     let _ = retention.await;
+    if let Some(m) = mqtt {
+        let _ = m.await;
+    }
     res
 }
 

@@ -23,7 +23,7 @@ use super::http::{body_format, check_machine_id, content_decoded, read_body};
 use super::machines::{DEFAULT_TACHO_CHANNEL, MachineContext};
 use super::metrics::StageClock;
 use super::spectrum::{PlotSpectrum, plot_from_spectrum, plot_spectrum};
-use super::wire::{BodyFormat, Decoded, decode, parse_query};
+use super::wire::{BodyFormat, Decoded, RecordQuery, decode, parse_query};
 use crate::assessment::{
     Assessment, Machine, MachineCalibration, RecordFacts, TableDiagnoser, TachoChannel, Thresholds,
     assess,
@@ -90,22 +90,92 @@ async fn ingest(
     if let Some(r) = idem.replay_stored(app).await? {
         return Ok(r);
     }
+    let prepared = prepare(app, machine_id, format, q, &bytes, &mut clock).await?;
+    if prepared.dec.record_id.is_some() {
+        return Err(ApiError::bad_request(
+            "invalid-json",
+            "Malformed JSON record",
+            "`record_id` is the id an MQTT payload is de-duplicated by; over HTTP, send an \
+             `Idempotency-Key` header instead",
+        ));
+    }
+    match accept(app, machine_id, format, prepared, &idem, clock).await? {
+        Accepted::Created {
+            response_text,
+            diagnosis_id,
+        } => Ok(created(response_text, &diagnosis_id)),
+        Accepted::Replayed(prev) => replay(app, &prev, &idem.request_hash),
+    }
+}
+
+/// A decoded record with its machine and what came with it: what [`prepare`] hands to
+/// [`accept`].
+pub struct Prepared {
+    machine: Option<MachineRow>,
+    /// The decoded record.
+    pub dec: Decoded,
+    request: RecordRequest,
+}
+
+/// The steps of every record path (HTTP and MQTT) before the assessment: the machine (and,
+/// with `--require-registered-machines`, that it is registered), the record decoded from
+/// `format` with the query parameters `q`, its tachometer.
+pub async fn prepare(
+    app: &AppState,
+    machine_id: &str,
+    format: BodyFormat,
+    q: RecordQuery,
+    bytes: &[u8],
+    clock: &mut StageClock,
+) -> ApiResult<Prepared> {
     let machine = app.store.get_machine(machine_id).await?;
     super::lifecycle::check_registered(app, machine_id, machine.as_ref())?;
     clock.skip();
     let pulses = tacho_name(machine.as_ref());
-    let dec = decode(format, &q, &bytes, limits, Some(pulses))?;
+    let dec = decode(format, &q, bytes, &app.settings.limits, Some(pulses))?;
     let declared_healthy = q.baseline()?;
     let tacho = tacho_of(machine.as_ref(), &dec, q.tacho_ppr()?)?;
     clock.lap("decode");
+    Ok(Prepared {
+        machine,
+        dec,
+        request: RecordRequest {
+            channel: q.channel,
+            declared_healthy,
+            tacho,
+        },
+    })
+}
 
-    let job = RecordRequest {
-        channel: q.channel,
-        declared_healthy,
-        tacho,
-    }
-    .load(app, machine_id, machine, dec)
-    .await?;
+/// What [`accept`] did with a record.
+pub enum Accepted {
+    /// Stored: the answer (the assessment with its ids) and the diagnosis's id.
+    Created {
+        response_text: String,
+        diagnosis_id: String,
+    },
+    /// A concurrent request with the same idempotency key committed first: its stored answer.
+    Replayed(IdemRow),
+}
+
+/// Assess a prepared record (off the async runtime, with the core's [`assess`]) and store it
+/// with its diagnosis, webhook deliveries and `idem`'s answer in one transaction; the record
+/// path every source shares.
+pub async fn accept(
+    app: &AppState,
+    machine_id: &str,
+    format: BodyFormat,
+    prepared: Prepared,
+    idem: &Idempotency,
+    mut clock: StageClock,
+) -> ApiResult<Accepted> {
+    let Prepared {
+        machine,
+        dec,
+        request,
+    } = prepared;
+    let declared_healthy = request.declared_healthy;
+    let job = request.load(app, machine_id, machine, dec).await?;
     let (dec, assessment, spectrum, job_clock) = tokio::task::spawn_blocking(move || job.run())
         .await
         .map_err(|e| ApiError::internal(format!("the diagnosis task failed: {e}")))?
@@ -129,7 +199,7 @@ async fn ingest(
             &ids,
             machine_id,
             format,
-            &idem,
+            idem,
             declared_healthy,
         ),
         diagnosis: diagnosis_row(
@@ -145,11 +215,7 @@ async fn ingest(
         registered_only: app.settings.require_registered_machines,
         alert: Some(AlertInput {
             severity: assessment.severity(&app.settings.thresholds),
-            measured_at: dec
-                .recorded_at
-                .as_deref()
-                .and_then(parse_rfc3339)
-                .unwrap_or(ids.now),
+            measured_at: measured_at(&dec, &ids),
             policy: app.settings.alerts,
         }),
     };
@@ -157,32 +223,32 @@ async fn ingest(
     let trend = super::trend::summary_with(app, &ing.diagnosis).await;
     ing.event_extras.insert("trend_summary".into(), trend);
     clock.lap("assemble");
-    if let Some(r) = store(app, ing, &idem).await? {
-        return Ok(r);
+    if let Some(prev) = store(app, ing, idem).await? {
+        return Ok(Accepted::Replayed(prev));
     }
     app.metrics.records_accepted.fetch_add(1, Ordering::Relaxed);
     app.metrics.stages(&clock);
     app.webhook_wake.notify_one();
     let ea = assessment.wear().map(|w| w.estimate);
     tracing::info!(machine = machine_id, diagnosis = %ids.diagnosis_id, ea, alert_level = assessment.level(), "record accepted");
-    Ok(created(response_text, &ids.diagnosis_id))
+    Ok(Accepted::Created {
+        response_text,
+        diagnosis_id: ids.diagnosis_id,
+    })
 }
 
 /// The store calls of one accepted record: its rows in one transaction (the group-commit
-/// queue); `Some(answer)` when a concurrent request with the same `Idempotency-Key` committed
-/// first (its answer is replayed).
-async fn store(app: &AppState, ing: Ingest, idem: &Idempotency) -> ApiResult<Option<Response>> {
+/// queue); `Some(answer)` when a concurrent request with the same idempotency key committed
+/// first (its stored answer).
+async fn store(app: &AppState, ing: Ingest, idem: &Idempotency) -> ApiResult<Option<IdemRow>> {
     match app.ingest_queue.ingest(ing).await {
         Ok(()) => Ok(None),
-        Err(StoreError::Conflict(_)) if idem.key.is_some() => {
-            // A concurrent request with the same key committed first: answer as it did.
-            match idem.stored(app).await? {
-                Some(prev) => replay(app, &prev, &idem.request_hash).map(Some),
-                None => Err(ApiError::internal(
-                    "idempotency conflict without a stored answer",
-                )),
-            }
-        }
+        Err(StoreError::Conflict(_)) if idem.key.is_some() => match idem.stored(app).await? {
+            Some(prev) => Ok(Some(prev)),
+            None => Err(ApiError::internal(
+                "idempotency conflict without a stored answer",
+            )),
+        },
         Err(e) => Err(e.into()),
     }
 }
@@ -410,12 +476,13 @@ fn diagnosis_row(
 fn measured_at(dec: &Decoded, ids: &Ids) -> i64 {
     dec.recorded_at
         .as_deref()
-        .and_then(crate::time::parse_rfc3339)
+        .and_then(parse_rfc3339)
         .unwrap_or(ids.now)
 }
 
-/// A request's `Idempotency-Key` and the hashes that identify it.
-struct Idempotency {
+/// A record's idempotency key (HTTP: the `Idempotency-Key` header, scoped to the API key;
+/// MQTT: the record id, scoped to the machine) and the hashes that identify the request.
+pub struct Idempotency {
     key: Option<String>,
     key_id: String,
     /// The body's SHA-256 (stored as the record's `sha256`).
@@ -449,6 +516,26 @@ impl Idempotency {
                 )
             }
         };
+        Ok(Idempotency::new(
+            caller.key_id.clone().unwrap_or_default(),
+            key,
+            machine_id,
+            format,
+            query,
+            bytes,
+        ))
+    }
+
+    /// The key `key` in the scope `key_id` for a record of `machine_id` sent as `bytes` in
+    /// `format` with the query (or MQTT header) `query`.
+    pub fn new(
+        key_id: String,
+        key: Option<String>,
+        machine_id: &str,
+        format: BodyFormat,
+        query: Option<&str>,
+        bytes: &[u8],
+    ) -> Idempotency {
         // The body is hashed once (it is stored as the record's `sha256`); the request hash
         // covers machine, content type, query and that body hash.
         let body_sha256 = hex::encode(Sha256::digest(bytes));
@@ -462,16 +549,21 @@ impl Idempotency {
             h.update(part);
             h.update([0u8]);
         }
-        Ok(Idempotency {
+        Idempotency {
             key,
-            key_id: caller.key_id.clone().unwrap_or_default(),
+            key_id,
             body_sha256,
             request_hash: hex::encode(h.finalize()),
-        })
+        }
+    }
+
+    /// Whether `prev`, a stored answer to this key, answered this same request.
+    pub fn same_request(&self, prev: &IdemRow) -> bool {
+        prev.request_hash == self.request_hash
     }
 
     /// The stored answer to this key, if any.
-    async fn stored(&self, app: &AppState) -> ApiResult<Option<IdemRow>> {
+    pub async fn stored(&self, app: &AppState) -> ApiResult<Option<IdemRow>> {
         match &self.key {
             Some(k) => Ok(app.store.get_idempotent(&self.key_id, k).await?),
             None => Ok(None),

@@ -13,6 +13,7 @@ mod cli;
 mod faults;
 mod gearboxes;
 mod lifecycle;
+mod mqtt;
 mod openapi;
 mod operating_state;
 mod planner;

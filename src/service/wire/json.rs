@@ -22,6 +22,9 @@ pub struct JsonRecord {
     pub sensor: Option<String>,
     /// `load`: a number, or a label (text that reads as a number is one: `"40"` is 40).
     pub load: Option<Load>,
+    /// `record_id`: the publisher's id of the record, which MQTT ingest de-duplicates by
+    /// (`docs/service.md#mqtt-ingest`); the HTTP endpoint refuses it (it has `Idempotency-Key`).
+    pub record_id: Option<String>,
 }
 
 /// The members as written, before the one-of rule on `samples` / `channels`.
@@ -43,6 +46,8 @@ struct JsonRecordBody {
     sensor: Option<String>,
     #[serde(default, deserialize_with = "load_member")]
     load: Option<Load>,
+    #[serde(default)]
+    record_id: Option<String>,
 }
 
 /// The `load` member: a number, a label ([`Load::parse`]: trimmed, a number when it reads as
@@ -110,6 +115,7 @@ impl TryFrom<JsonRecordBody> for JsonRecord {
             recorded_at: b.recorded_at,
             sensor: b.sensor,
             load: b.load,
+            record_id: b.record_id,
         })
     }
 }
@@ -194,6 +200,7 @@ pub fn fast_json_record(b: &[u8]) -> Option<JsonRecord> {
     let mut p = JsonCursor { b, i: 0 };
     let (mut rate, mut samples, mut shaft, mut recorded_at, mut sensor, mut load) =
         (None, None, None, None, None, None);
+    let mut record_id = None;
     p.ws();
     p.eat(b'{')?;
     loop {
@@ -217,6 +224,13 @@ pub fn fast_json_record(b: &[u8]) -> Option<JsonRecord> {
             }
             "sensor" if sensor.is_none() => {
                 sensor = Some(if p.null() {
+                    None
+                } else {
+                    Some(p.plain_string()?.to_owned())
+                })
+            }
+            "record_id" if record_id.is_none() => {
+                record_id = Some(if p.null() {
                     None
                 } else {
                     Some(p.plain_string()?.to_owned())
@@ -252,6 +266,7 @@ pub fn fast_json_record(b: &[u8]) -> Option<JsonRecord> {
         recorded_at: recorded_at.flatten(),
         sensor: sensor.flatten(),
         load: load.flatten(),
+        record_id: record_id.flatten(),
     })
 }
 

@@ -185,6 +185,8 @@ pub struct Decoded {
     pub sensor: Option<String>,
     /// The load the record was taken at (body, else query).
     pub load: Option<Load>,
+    /// A JSON body's `record_id` (MQTT ingest de-duplicates by it).
+    pub record_id: Option<String>,
 }
 
 fn too_many_samples(samples: usize, limit: usize) -> ApiError {
@@ -326,6 +328,7 @@ pub fn decode(
     let mut recorded_at = q.recorded_at.clone();
     let mut sensor = q.sensor.clone();
     let mut load = q.load.as_deref().and_then(Load::parse);
+    let mut record_id = None;
     let (channels, fs) = match format {
         BodyFormat::Json => {
             let mut r = JsonRecord::from_json(bytes).map_err(|e| {
@@ -356,6 +359,7 @@ pub fn decode(
             if r.load.is_some() {
                 load = r.load.take();
             }
+            record_id = r.record_id.take();
             let fs = r.sample_rate_hz;
             let chans = r.into_channels();
             (
@@ -441,5 +445,6 @@ pub fn decode(
         recorded_at,
         sensor,
         load,
+        record_id,
     })
 }
