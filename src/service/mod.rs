@@ -161,6 +161,7 @@ pub fn router(state: AppState) -> Router {
             "/v1/webhooks/{webhook_id}/deliveries",
             get(webhooks::deliveries),
         )
+        .route("/v1/records/{record_id}", get(read::get_record))
         .route("/healthz", get(health::healthz))
         .route("/readyz", get(health::readyz))
         .route("/metrics", get(health::metrics))
@@ -212,6 +213,7 @@ pub const ROUTES: &[(&str, &str)] = &[
     ("GET", "/v1/webhooks"),
     ("DELETE", "/v1/webhooks/{webhook_id}"),
     ("GET", "/v1/webhooks/{webhook_id}/deliveries"),
+    ("GET", "/v1/records/{record_id}"),
     ("GET", "/healthz"),
     ("GET", "/readyz"),
     ("GET", "/metrics"),

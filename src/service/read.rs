@@ -241,8 +241,35 @@ pub async fn get_diagnosis(
         )
         .with("diagnosis_id", id.as_str())
     })?;
-    let mut body = diagnosis_summary(&d);
+    Ok(diagnosis_view(&headers, &d))
+}
+
+/// One record's diagnosis, by the record's id (a deep link from an alert or a trend point,
+/// which name records): the same answer as `GET /v1/diagnoses/{id}`.
+pub async fn get_record(
+    State(app): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+) -> ApiResult<Response> {
+    caller.require_read(&app)?;
+    let d = app.store.diagnosis_of_record(&id).await?.ok_or_else(|| {
+        ApiError::not_found(
+            "unknown-record",
+            format!(
+                "no record `{id}`; record ids are the `record_id` of a POST …/records answer, \
+                 of a diagnosis, a trend point or an alert (a deleted machine's records are gone)"
+            ),
+        )
+        .with("record_id", id.as_str())
+    })?;
+    Ok(diagnosis_view(&headers, &d))
+}
+
+/// A stored diagnosis with its full body and spectrum, ETagged.
+fn diagnosis_view(headers: &HeaderMap, d: &DiagnosisRow) -> Response {
+    let mut body = diagnosis_summary(d);
     body["diagnosis"] = serde_json::from_str(&d.body).unwrap_or(Value::Null);
     body["spectrum"] = serde_json::from_str(&d.spectrum).unwrap_or(Value::Null);
-    Ok(json_with_etag(&headers, &body))
+    json_with_etag(headers, &body)
 }

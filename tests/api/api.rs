@@ -190,6 +190,22 @@ async fn ingest_json_then_read_everything_back(b: Backend) {
         marks.contains(&"f1") && marks.contains(&"f2") && marks.contains(&"f3"),
         "{marks:?}"
     );
+
+    // The same answer by the record's id (alerts and trend points name records).
+    let record_id = d["record_id"].as_str().unwrap();
+    let (s, _, body) = checked(
+        app.client
+            .get(app.url(&format!("/v1/records/{record_id}")))
+            .bearer_auth(&app.read_key),
+        "GET",
+        "/v1/records/{record_id}",
+    )
+    .await;
+    assert_eq!(s, 200);
+    let by_record = json(&body);
+    assert_eq!(by_record["id"], id.as_str());
+    assert_eq!(by_record["record_id"], record_id);
+    assert_eq!(by_record["diagnosis"], dd["diagnosis"]);
 }
 
 async fn every_body_format_is_accepted(b: Backend) {

@@ -712,6 +712,12 @@ async fn bad_reads(b: Backend) {
             "invalid-query",
         ),
         (
+            "unknown record",
+            app.get("/v1/records/nope").await,
+            404,
+            "unknown-record",
+        ),
+        (
             "unknown route",
             app.get("/v2/nothing").await,
             404,

@@ -27,7 +27,7 @@ fn find(names: &[&str]) -> Option<PathBuf> {
     None
 }
 
-struct Driver {
+pub struct Driver {
     child: Child,
     base: String,
     session: String,
@@ -35,7 +35,7 @@ struct Driver {
 }
 
 impl Driver {
-    async fn cmd(&self, method: reqwest::Method, path: &str, body: Option<Value>) -> Value {
+    pub async fn cmd(&self, method: reqwest::Method, path: &str, body: Option<Value>) -> Value {
         let url = format!("{}/session/{}{path}", self.base, self.session);
         let mut r = self.http.request(method, url);
         if let Some(b) = body {
@@ -45,7 +45,7 @@ impl Driver {
         v["value"].clone()
     }
 
-    async fn script(&self, js: &str) -> Value {
+    pub async fn script(&self, js: &str) -> Value {
         self.cmd(
             reqwest::Method::POST,
             "/execute/sync",
@@ -54,7 +54,7 @@ impl Driver {
         .await
     }
 
-    async fn wait_for(&self, what: &str, js: &str) -> Value {
+    pub async fn wait_for(&self, what: &str, js: &str) -> Value {
         let t = Instant::now();
         loop {
             let v = self.script(js).await;
@@ -79,7 +79,7 @@ impl Drop for Driver {
 
 /// chromedriver + a headless Chromium session; `None` (after saying why) when they are not
 /// installed and `CI` is not set.
-async fn start_driver() -> Option<(Driver, PathBuf)> {
+pub async fn start_driver() -> Option<(Driver, PathBuf)> {
     let (Some(chromium), Some(chromedriver)) = (
         find(&["chromium", "chromium-browser"]),
         find(&["chromedriver"]),
@@ -175,6 +175,13 @@ async fn dashboard_updates_when_a_record_arrives() {
         app.post_json("gearbox-1", &json_record(3)).await.status(),
         201
     );
+    // `/` is the planner's overview: the machine appears there; its link opens its page.
+    d.wait_for(
+        "the new machine in the overview",
+        "const a = document.querySelector('#fleet-rows tr[data-id=\"gearbox-1\"] a.machine-link'); \
+         if (!a) return null; a.click(); return true",
+    )
+    .await;
     let est = d
         .wait_for(
             "the new machine and its wear estimate",
@@ -346,7 +353,7 @@ async fn dashboard_asks_for_a_read_key() {
 }
 
 /// POST a JSON record; its answer.
-async fn post(app: &TestApp, machine: &str, query: &str, body: &Value) -> Value {
+pub async fn post(app: &TestApp, machine: &str, query: &str, body: &Value) -> Value {
     let r = app
         .client
         .post(app.url(&format!("/v1/machines/{machine}/records{query}")))

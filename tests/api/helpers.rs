@@ -391,10 +391,18 @@ pub fn json_record(seed: u64) -> Value {
     if let Some(v) = cache.lock().unwrap().get(&seed) {
         return v.clone();
     }
+    let v = rig_record(0.5, seed);
+    cache.lock().unwrap().insert(seed, v.clone());
+    v
+}
+
+/// A record the rig's model explains, simulated at wear degree `ea` (as [`json_record`], which
+/// is this at ea = 0.5, cached).
+pub fn rig_record(ea: f64, seed: u64) -> Value {
     let rec = gearwear::signature::precompute::simulate_measurement(
         &gearwear::gearbox::Gearbox::paper_rig(),
         &gearwear::signature::precompute::MeasurementSpec {
-            ea: 0.5,
+            ea,
             omega1: 1.07,
             sample_rate: 25_600.0,
             duration: 1.0,
@@ -406,10 +414,8 @@ pub fn json_record(seed: u64) -> Value {
         },
     )
     .expect("the rig simulates");
-    let v = serde_json::json!({"sample_rate_hz": rec.sample_rate, "samples": rec.samples,
-                               "shaft_hz": 1.07 * 30.0, "sensor": "test-accel"});
-    cache.lock().unwrap().insert(seed, v.clone());
-    v
+    serde_json::json!({"sample_rate_hz": rec.sample_rate, "samples": rec.samples,
+                       "shaft_hz": 1.07 * 30.0, "sensor": "test-accel"})
 }
 
 /// Records the paper rig's model does not explain (its fit is poor: with no baseline their

@@ -16,6 +16,7 @@ mod lifecycle;
 mod mqtt;
 mod openapi;
 mod operating_state;
+mod planner;
 mod quality_battery;
 mod security;
 mod store;

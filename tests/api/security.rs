@@ -88,6 +88,7 @@ const TABLE: &[(&str, &str, Need)] = &[
         "/v1/diagnoses/{diagnosis_id}",
         Need::Key(Scope::Read),
     ),
+    ("GET", "/v1/records/{record_id}", Need::Key(Scope::Read)),
     ("PUT", "/v1/machines/{machine_id}", Need::Key(Scope::Admin)),
     (
         "DELETE",

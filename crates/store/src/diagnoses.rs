@@ -85,6 +85,9 @@ pub trait DiagnosisStore: Send + Sync {
         limit: i64,
     ) -> StoreResult<Vec<DiagnosisRow>>;
     async fn get_diagnosis(&self, id: &str) -> StoreResult<Option<DiagnosisRow>>;
+    /// The diagnosis of one record (every stored record has one), found through the record's
+    /// machine so that the lookup walks the `diagnoses_machine` index, not the whole table.
+    async fn diagnosis_of_record(&self, record_id: &str) -> StoreResult<Option<DiagnosisRow>>;
 }
 
 /// The SQL of [`DiagnosisStore`] for one backend: `$store` is the store type, `$db` its
@@ -216,6 +219,21 @@ macro_rules! diagnoses_sql {
                     .bind(id)
                     .fetch_optional(&self.pool)
                     .await?;
+                r.as_ref().map(|r| diagnosis_row(r, true)).transpose()
+            }
+
+            async fn diagnosis_of_record(
+                &self,
+                record_id: &str,
+            ) -> StoreResult<Option<DiagnosisRow>> {
+                let r = sqlx::query(
+                    "SELECT d.* FROM records r JOIN diagnoses d \
+                     ON d.machine_id = r.machine_id AND d.record_id = r.id \
+                     WHERE r.id = $1 ORDER BY d.seq LIMIT 1",
+                )
+                .bind(record_id)
+                .fetch_optional(&self.pool)
+                .await?;
                 r.as_ref().map(|r| diagnosis_row(r, true)).transpose()
             }
         }
