@@ -33,8 +33,8 @@ impl Broker {
         use std::os::unix::fs::PermissionsExt;
         std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o777)).unwrap();
         // Room for every message queued for a session (mosquitto's default, 1000, would drop
-        // the rest while the service is away; `0`, "no limit", drops everything in mosquitto
-        // 2.0.16 to 2.0.21). Everything is logged, to a file kept when the test fails.
+        // the rest while the service is away; `0`, "no limit", is mishandled by some releases,
+        // 2.0.16 and 2.0.21). Everything is logged, to a file kept when the test fails.
         let conf = format!(
             "listener {port} 127.0.0.1\nallow_anonymous true\npersistence true\n\
              persistence_location {d}/\nmax_queued_messages 1000000\n\
