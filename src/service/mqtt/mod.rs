@@ -21,13 +21,13 @@ pub mod topic;
 
 use std::collections::BTreeMap;
 use std::fmt::Write;
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use axum::http::StatusCode;
 use rumqttc::{AsyncClient, Event, MqttOptions, Packet, Publish, QoS};
-use tokio::sync::watch;
+use tokio::sync::{Semaphore, watch};
 use tokio::task::JoinSet;
 
 use super::AppState;
@@ -42,6 +42,11 @@ pub use topic::TopicFilter;
 pub const MIN_BACKOFF: Duration = Duration::from_millis(100);
 /// Longest wait between connection attempts.
 pub const MAX_BACKOFF: Duration = Duration::from_secs(10);
+/// Records assessed and stored at once. A broker may hand over its whole queue for the
+/// session at once (mosquitto does after a restart); the rest wait for a slot (their payloads
+/// held in memory) instead of all competing for the CPU and the store's connections, where
+/// they ran into the pool's timeout and its back-off.
+const CONCURRENT_RECORDS: usize = 8;
 /// How long a stopping service keeps the connection for records in flight to be acknowledged.
 const DRAIN: Duration = Duration::from_secs(10);
 
@@ -178,6 +183,7 @@ pub async fn run(app: AppState, s: MqttSettings, mut stop: watch::Receiver<bool>
     let max_payload = app.settings.limits.max_body_bytes;
     let (client, mut events) = AsyncClient::new(s.options(max_payload), 64);
     let mut tasks = JoinSet::new();
+    let ingesting = Arc::new(Semaphore::new(CONCURRENT_RECORDS));
     let mut backoff = MIN_BACKOFF;
     tracing::info!(host = %s.host, port = s.port, topic = %s.filter.subscription, "MQTT ingest");
     loop {
@@ -191,11 +197,17 @@ pub async fn run(app: AppState, s: MqttSettings, mut stop: watch::Receiver<bool>
                 backoff = MIN_BACKOFF;
                 metrics.connections.fetch_add(1, Ordering::Relaxed);
                 tracing::info!(session_present = c.session_present, "MQTT connected");
-                // Not `subscribe().await`: this task drives the event loop that drains the
-                // request channel.
-                if let Err(e) = client.try_subscribe(&s.filter.subscription, QoS::AtLeastOnce) {
-                    tracing::error!(error = %e, "MQTT subscribe could not be queued");
-                }
+                // Subscribe after every connection (a broker without persistence forgets
+                // the session), from a task of its own: this loop drives the event loop that
+                // drains the request channel, and that channel can be full of the
+                // acknowledgements of records finishing — `try_subscribe` then failed and
+                // left the service connected but deaf.
+                let (client, filter) = (client.clone(), s.filter.subscription.clone());
+                tasks.spawn(async move {
+                    if let Err(e) = client.subscribe(&filter, QoS::AtLeastOnce).await {
+                        tracing::error!(error = %e, "MQTT subscribe could not be queued");
+                    }
+                });
             }
             Ok(Event::Incoming(Packet::SubAck(a))) => {
                 let ok = a
@@ -210,6 +222,7 @@ pub async fn run(app: AppState, s: MqttSettings, mut stop: watch::Receiver<bool>
             Ok(Event::Incoming(Packet::Publish(p))) => {
                 let job = Message {
                     app: app.clone(),
+                    ingesting: ingesting.clone(),
                     client: client.clone(),
                     settings: s.clone(),
                     stop: stop.clone(),
@@ -264,6 +277,8 @@ enum Outcome {
 /// One message's handling.
 struct Message {
     app: AppState,
+    /// A slot of [`CONCURRENT_RECORDS`].
+    ingesting: Arc<Semaphore>,
     client: AsyncClient,
     settings: MqttSettings,
     stop: watch::Receiver<bool>,
@@ -275,6 +290,10 @@ impl Message {
     async fn handle(mut self, p: Publish) {
         let metrics = &self.app.metrics.mqtt;
         let mut backoff = MIN_BACKOFF;
+        let _slot = tokio::select! {
+            _ = self.stop.changed() => return,
+            slot = self.ingesting.clone().acquire_owned() => slot,
+        };
         let result = loop {
             match ingest(&self.app, &self.settings.filter, &p).await {
                 Err((e, _)) if e.status == StatusCode::SERVICE_UNAVAILABLE => {
