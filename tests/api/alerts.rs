@@ -23,23 +23,7 @@ fn wear_record(ea: f64, seed: u64, minute: u32) -> Value {
     let key = (ea.to_bits(), seed);
     let cached = cache.lock().unwrap().get(&key).cloned();
     let mut v = cached.unwrap_or_else(|| {
-        let rec = gearwear::signature::precompute::simulate_measurement(
-            &gearwear::gearbox::Gearbox::paper_rig(),
-            &gearwear::signature::precompute::MeasurementSpec {
-                ea,
-                omega1: 1.07,
-                sample_rate: 25_600.0,
-                duration: 1.0,
-                gain: 2.0,
-                snr_db: Some(25.0),
-                seed,
-                sensor: gearwear::signature::SensorQuantity::Accel,
-                planetary: None,
-            },
-        )
-        .expect("the rig simulates");
-        let v = json!({"sample_rate_hz": rec.sample_rate, "samples": rec.samples,
-                       "shaft_hz": 1.07 * 30.0});
+        let v = rig_record(ea, seed);
         cache.lock().unwrap().insert(key, v.clone());
         v
     });

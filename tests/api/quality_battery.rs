@@ -61,6 +61,9 @@ enum Expect {
     Rate(f64),
     /// Accepted with a warning containing this phrase.
     Warned(&'static str),
+    /// Accepted, nothing repaired; `quality.findings` has this defect, kept as signal
+    /// (`warned`), from this sample.
+    Kept(&'static str, usize),
     /// Refused: status, problem type slug, and a phrase of the detail (the defect and where).
     Refused(u16, &'static str, &'static str),
     /// Accepted or refused, anything but a 5xx (a rate the check may not tell).
@@ -170,7 +173,7 @@ fn variants() -> Vec<Variant> {
                     y[700 + 1500 * k] = 80.0 * rms;
                 }
             }),
-            Refused(422, "record-quality", "20 isolated spikes"),
+            Kept("impulses", 700),
         ),
         variant(
             "a burst of 1e20 over 50 samples",
@@ -332,6 +335,20 @@ fn check_answer(what: &str, expect: Expect, status: u16, body: &Value, original:
                     "{what}"
                 );
             }
+        }
+        Expect::Kept(defect, at) => {
+            assert_eq!(status, 201, "{what}: {body}");
+            let q = &body["quality"];
+            assert_eq!(q["status"], "warned", "{what}: {q}");
+            assert_eq!(q["repaired_samples"], 0, "{what}: {q}");
+            let f = &q["findings"][0];
+            assert_eq!(
+                (f["defect"].as_str(), f["action"].as_str()),
+                (Some(defect), Some("warned")),
+                "{what}: {q}"
+            );
+            assert_eq!(f["first_sample"], at, "{what}: {q}");
+            no_nulls_where_numbers(original, body, what);
         }
         Expect::Warned(phrase) => {
             assert_eq!(status, 201, "{what}: {body}");

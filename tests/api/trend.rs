@@ -20,23 +20,9 @@ const DAYS: usize = 12;
 /// A record the rig's model explains (Ω1 = 1.07, gain 2, 25 dB) at wear `ea`, measured at
 /// 08:00 on day `day` of November 2026.
 fn record(ea: f64, day: usize, seed: u64) -> Value {
-    let rec = gearwear::signature::precompute::simulate_measurement(
-        &gearwear::gearbox::Gearbox::paper_rig(),
-        &gearwear::signature::precompute::MeasurementSpec {
-            ea,
-            omega1: 1.07,
-            sample_rate: 25_600.0,
-            duration: 1.0,
-            gain: 2.0,
-            snr_db: Some(25.0),
-            seed,
-            sensor: gearwear::signature::SensorQuantity::Accel,
-            planetary: None,
-        },
-    )
-    .expect("the rig simulates");
-    json!({"sample_rate_hz": rec.sample_rate, "samples": rec.samples, "shaft_hz": 1.07 * 30.0,
-           "recorded_at": format!("2026-11-{:02}T08:00:00Z", day + 1)})
+    let mut v = rig_record(ea, seed);
+    v["recorded_at"] = format!("2026-11-{:02}T08:00:00Z", day + 1).into();
+    v
 }
 
 async fn get_trend(app: &TestApp, machine: &str, query: &str) -> (u16, Value) {

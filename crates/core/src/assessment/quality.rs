@@ -71,6 +71,16 @@ pub fn inspect_channels(
             Err(e) => return Err(e),
         };
         if ins.spans.is_empty() {
+            // Findings kept as signal (impulses): reported, nothing repaired.
+            if !ins.findings.is_empty() && q.status == "clean" {
+                q.status = "warned";
+            }
+            q.findings.extend(ins.findings.into_iter().map(|mut f| {
+                if several {
+                    f.channel = Some(name.clone());
+                }
+                f
+            }));
             continue;
         }
         ins.repair(x);

@@ -14,7 +14,7 @@
 //! | defect | rule | policy |
 //! | --- | --- | --- |
 //! | absurd value | \|x\| > [`ABSURD_MAGNITUDE`], or beyond the declared unit's plausible range ([`plausible_limit`]) | repaired when inside an isolated spike, else refused |
-//! | spike | a cluster of samples beyond [`SPIKE_SIGMAS`] σ_r of the median, at most [`MAX_SPIKE_WIDTH`] wide | up to [`MAX_REPAIRABLE_SPIKES`] repaired (linear interpolation between the neighbours), more refused |
+//! | spike | a cluster of samples beyond [`SPIKE_SIGMAS`] σ_r of the median, at most [`MAX_SPIKE_WIDTH`] wide | up to [`MAX_REPAIRABLE_SPIKES`] repaired (linear interpolation between the neighbours); more: refused when any holds an absurd value, else kept as signal (`impulses`, warned: tooth impacts) |
 //! | dropout | a run of at least [`DROPOUT_MIN_RUN`] samples of one exact value | refused |
 //! | DC step | the means before and after one sample differ by more than [`DC_STEP_SIGMAS`] σ_r and [`DC_STEP_NOISE`] standard errors (both sides at least 10 % of the record) | refused |
 
@@ -54,7 +54,7 @@ pub const REPAIR_KEEPS_ALERT_FRACTION: f64 = 1e-4;
 /// record's start), and what was done.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct QualityFinding {
-    /// `spike`, `absurd-value`, `dropout`, `dc-step` or `sample-rate`.
+    /// `spike`, `impulses`, `absurd-value`, `dropout`, `dc-step` or `sample-rate`.
     pub defect: &'static str,
     /// The channel, in a record of several channels.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -206,22 +206,7 @@ pub fn inspect(x: &[f64], fs: f64, limit: Option<f64>) -> Result<Inspection> {
         }
     }
     if spikes.len() > MAX_REPAIRABLE_SPIKES {
-        let &&(a, b) = spikes.first().expect("spikes exist");
-        let &&(_, z) = spikes.last().expect("spikes exist");
-        return Err(refuse(finding(
-            "spike",
-            (a, z),
-            fs,
-            "refused",
-            format!(
-                "{} isolated spikes (beyond {SPIKE_SIGMAS} robust σ, at most {MAX_SPIKE_WIDTH} \
-                 samples wide) between {} and {}: more than the {MAX_REPAIRABLE_SPIKES} that can \
-                 be repaired — check the sensor's cable and grounding and record again",
-                spikes.len(),
-                place(a, b, fs),
-                place(z, z, fs)
-            ),
-        )));
+        return many_spikes(x, fs, &spikes, absurd, sigma);
     }
     for &&(a, b) in &spikes {
         let peak = x[a..=b].iter().fold(0.0_f64, |m, v| m.max(v.abs()));
@@ -246,6 +231,63 @@ pub fn inspect(x: &[f64], fs: f64, limit: Option<f64>) -> Result<Inspection> {
     let mut clean = x.to_vec();
     ins.repair(&mut clean);
     find_dc_step(&clean, fs, sigma)?;
+    Ok(ins)
+}
+
+/// More than [`MAX_REPAIRABLE_SPIKES`] short outlier clusters. With an absurd value among them
+/// the record is corrupt: refused. Otherwise they are kept as signal, with a `warned`
+/// `impulses` finding and nothing repaired: many short, large excursions are what tooth
+/// impacts (a chipped or broken tooth, backlash rattle) put into a record, and repairing them
+/// would erase the very evidence of the fault (a simulated planetary rig's clearance impacts
+/// reach beyond 25 σ_r; a sensor that glitches this often shows absurd values or dropouts too).
+fn many_spikes(
+    x: &[f64],
+    fs: f64,
+    spikes: &[&(usize, usize)],
+    absurd: impl Fn(f64) -> bool,
+    sigma: f64,
+) -> Result<Inspection> {
+    let &(a, b) = spikes[0];
+    let &(_, z) = spikes[spikes.len() - 1];
+    if spikes
+        .iter()
+        .any(|&&(p, q)| x[p..=q].iter().any(|&v| absurd(v)))
+    {
+        return Err(refuse(finding(
+            "spike",
+            (a, z),
+            fs,
+            "refused",
+            format!(
+                "{} isolated spikes (beyond {SPIKE_SIGMAS} robust σ, at most {MAX_SPIKE_WIDTH} \
+                 samples wide), some with absurd values, between {} and {}: more than the \
+                 {MAX_REPAIRABLE_SPIKES} that can be repaired — check the sensor's cable and \
+                 grounding and record again",
+                spikes.len(),
+                place(a, b, fs),
+                place(z, z, fs)
+            ),
+        )));
+    }
+    let peak = spikes
+        .iter()
+        .flat_map(|&&(p, q)| x[p..=q].iter())
+        .fold(0.0_f64, |m, v| m.max(v.abs()));
+    let mut ins = Inspection::default();
+    ins.findings.push(finding(
+        "impulses",
+        (a, z),
+        fs,
+        "warned",
+        format!(
+            "{} short impulses beyond {SPIKE_SIGMAS} robust σ (|x| up to {peak:.4e}, σ_r = \
+             {sigma:.4e}) between {} and {}: kept as signal — tooth impacts look like this; if \
+             the sensor or its cable is suspect, check it",
+            spikes.len(),
+            place(a, b, fs),
+            place(z, z, fs)
+        ),
+    ));
     Ok(ins)
 }
 

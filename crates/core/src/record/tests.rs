@@ -603,3 +603,34 @@ fn gzip_csv_channels_from_a_file() {
     assert_eq!(r.channels[1].samples[..6], [0.0, 1.0, 2.0, 3.0, 4.0, 0.0]);
     assert_eq!(one.unwrap().channels, [r.channels[3].clone()]);
 }
+
+/// A 2 kHz sine with `n` one-sample impulses of `height` every 500 samples.
+fn with_impulses(n: usize, height: f64) -> Vec<f64> {
+    let mut x: Vec<f64> = (0..20_000)
+        .map(|i| (2.0 * std::f64::consts::PI * 2000.0 * i as f64 / 25_600.0).sin())
+        .collect();
+    for k in 0..n {
+        x[250 + 500 * k] = height;
+    }
+    x
+}
+
+#[test]
+fn a_few_spikes_are_repaired_many_impulses_kept_and_absurd_ones_refused() {
+    let few = inspect(&with_impulses(3, 60.0), 25_600.0, None).unwrap();
+    assert_eq!(few.spans.len(), 3);
+    assert!(few.findings.iter().all(|f| f.action == "repaired"));
+
+    let many = inspect(&with_impulses(20, 60.0), 25_600.0, None).unwrap();
+    assert!(many.spans.is_empty(), "impulses are kept as signal");
+    assert_eq!(many.findings.len(), 1);
+    let f = &many.findings[0];
+    assert_eq!((f.defect, f.action), ("impulses", "warned"));
+    assert_eq!((f.first_sample, f.last_sample), (250, 250 + 500 * 19));
+
+    let corrupt = inspect(&with_impulses(20, 1e20), 25_600.0, None);
+    assert!(
+        matches!(corrupt, Err(Error::RecordQuality(ref f)) if f.defect == "spike"),
+        "{corrupt:?}"
+    );
+}
