@@ -37,7 +37,7 @@ pub struct Settings {
     /// retrying within it gets the original answer, later the key is forgotten.
     pub idempotency_retention: Duration,
     /// MQTT ingest (`--mqtt-url`): off when `None`.
-    pub mqtt: Option<crate::service::mqtt::MqttSettings>,
+    pub mqtt: Option<crate::service::mqtt::settings::MqttSettings>,
 }
 
 /// Request limits. Each refusal is a problem+json naming the limit.

@@ -143,6 +143,18 @@ impl From<StoreError> for ApiError {
     }
 }
 
+/// 404 `unknown-machine`: no machine of that id (the reads, its trend, its configuration).
+pub fn unknown_machine(id: &str) -> ApiError {
+    ApiError::not_found(
+        "unknown-machine",
+        format!(
+            "no machine `{id}`: it has no accepted record and no configuration yet (machines \
+             appear with their first POSTed record or PUT /v1/machines/{id})"
+        ),
+    )
+    .with("machine_id", id)
+}
+
 /// 404 `unknown-machine` for a record refused by `--require-registered-machines`: the
 /// machine was not registered with `PUT /v1/machines/{id}` (nothing was stored).
 pub fn unregistered_machine(id: &str) -> ApiError {

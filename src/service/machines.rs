@@ -28,7 +28,7 @@ use serde_json::{Value, json};
 
 use super::AppState;
 use super::auth::Caller;
-use super::error::{ApiError, ApiResult};
+use super::error::{ApiError, ApiResult, unknown_machine};
 use super::gearboxes::BUILTIN_ID;
 use super::http::{check_gearbox_id, check_machine_id, json_with_etag, read_body};
 use crate::assessment::state_baseline;
@@ -398,14 +398,6 @@ pub async fn put(
         StatusCode::OK
     };
     Ok((status, Json(body)).into_response())
-}
-
-fn unknown_machine(id: &str) -> ApiError {
-    ApiError::not_found(
-        "unknown-machine",
-        format!("no machine `{id}`: it has no record and no configuration yet"),
-    )
-    .with("machine_id", id)
 }
 
 /// The `baseline` object of a machine: its records and, per channel, how many and whether a

@@ -31,7 +31,7 @@ pub struct Metrics {
     /// CPU seconds the record path spent in each stage, and how many times it ran.
     stages: Mutex<BTreeMap<&'static str, (f64, u64)>>,
     /// MQTT ingest's connection and messages.
-    pub mqtt: super::mqtt::MqttMetrics,
+    pub mqtt: super::mqtt::metrics::MqttMetrics,
 }
 
 /// CPU time of the calling thread, in seconds (`CLOCK_THREAD_CPUTIME_ID`): what a stage of

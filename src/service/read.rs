@@ -8,7 +8,7 @@ use serde_json::{Value, json};
 
 use super::AppState;
 use super::auth::Caller;
-use super::error::{ApiError, ApiResult};
+use super::error::{ApiError, ApiResult, unknown_machine};
 use super::gearboxes::BUILTIN_ID;
 use super::http::{check_machine_id, json_with_etag};
 use crate::store::{DiagnosisRow, MachineRow, novelty_json, wear_json};
@@ -44,14 +44,6 @@ pub fn diagnosis_summary(d: &DiagnosisRow) -> Value {
         "novelty": novelty_json(d),
         "channel": d.channel,
     })
-}
-
-pub(super) fn unknown_machine(id: &str) -> ApiError {
-    ApiError::not_found(
-        "unknown-machine",
-        format!("no machine `{id}`: it has no accepted record and no configuration yet (machines appear with their first POSTed record or PUT /v1/machines/{id})"),
-    )
-    .with("machine_id", id)
 }
 
 pub async fn list_machines(

@@ -288,7 +288,7 @@ pub async fn get_trend(
         .with("parameter", "channel"));
     }
     if app.store.get_machine(&id).await?.is_none() {
-        return Err(super::read::unknown_machine(&id));
+        return Err(super::error::unknown_machine(&id));
     }
     let rows = if series.needs_body(channel) {
         app.store.series_diagnoses(&id, SERIES_POINTS).await?

@@ -16,13 +16,16 @@
 //! * the connection is retried with exponential back-off (0.1 s doubling to 10 s); `/metrics`
 //!   shows its state (`gearwear_mqtt_connected`) and the messages by outcome.
 
+pub mod metrics;
 pub mod payload;
+pub mod settings;
 pub mod topic;
 
-use std::collections::BTreeMap;
-use std::fmt::Write;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
+pub use self::metrics::MqttMetrics;
+pub use self::settings::MqttSettings;
+
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use axum::http::StatusCode;
@@ -50,129 +53,19 @@ const CONCURRENT_RECORDS: usize = 8;
 /// How long a stopping service keeps the connection for records in flight to be acknowledged.
 const DRAIN: Duration = Duration::from_secs(10);
 
-/// Where and what to subscribe to.
-#[derive(Debug, Clone)]
-pub struct MqttSettings {
-    pub host: String,
-    pub port: u16,
-    pub username: Option<String>,
-    pub password: Option<String>,
-    pub filter: TopicFilter,
-    /// The persistent session's client id (one per replica).
-    pub client_id: String,
-    /// Where refused payloads' problems go.
-    pub error_topic: String,
-}
-
-impl MqttSettings {
-    /// From `--mqtt-url mqtt://[user[:password]@]host[:port]` (port 1883 by default),
-    /// `--mqtt-topic`, `--mqtt-client-id` and `--mqtt-error-topic`; errors name the flag.
-    pub fn parse(
-        url: &str,
-        topic: &str,
-        client_id: &str,
-        error_topic: &str,
-    ) -> Result<MqttSettings, String> {
-        let u = url::Url::parse(url).map_err(|e| format!("--mqtt-url `{url}`: {e}"))?;
-        if !matches!(u.scheme(), "mqtt" | "tcp") {
-            return Err(format!(
-                "--mqtt-url `{url}`: only plain TCP is supported (`mqtt://host:1883`); for \
-                 TLS, run the broker's TLS listener behind a local bridge"
-            ));
-        }
-        let host = u
-            .host_str()
-            .filter(|h| !h.is_empty())
-            .ok_or_else(|| format!("--mqtt-url `{url}` names no host"))?;
-        let filter = TopicFilter::parse(topic)?;
-        if filter.matches(error_topic) || error_topic.contains(['+', '#']) || error_topic.is_empty()
-        {
-            return Err(format!(
-                "--mqtt-error-topic `{error_topic}` must be a topic name outside --mqtt-topic \
-                 `{topic}` (the service would read its own error messages)"
-            ));
-        }
-        if client_id.is_empty() || client_id.len() > 64 {
-            return Err("--mqtt-client-id is 1 to 64 characters".into());
-        }
-        Ok(MqttSettings {
-            host: host.trim_matches(['[', ']']).to_string(),
-            port: u.port().unwrap_or(1883),
-            username: (!u.username().is_empty()).then(|| u.username().to_string()),
-            password: u.password().map(str::to_string),
-            filter,
-            client_id: client_id.to_string(),
-            error_topic: error_topic.to_string(),
-        })
+/// The client's options for `s`: a persistent session, manual acknowledgements, packets up to
+/// the largest record (`max_payload`, bytes) plus headroom.
+fn options(s: &MqttSettings, max_payload: usize) -> MqttOptions {
+    let mut o = MqttOptions::new(&s.client_id, &s.host, s.port);
+    o.set_keep_alive(Duration::from_secs(30))
+        .set_clean_session(false)
+        .set_manual_acks(true)
+        // The largest record plus the header and the packet's own bytes.
+        .set_max_packet_size(max_payload + (64 << 10), 64 << 10);
+    if let Some(user) = &s.username {
+        o.set_credentials(user, s.password.clone().unwrap_or_default());
     }
-
-    fn options(&self, max_payload: usize) -> MqttOptions {
-        let mut o = MqttOptions::new(&self.client_id, &self.host, self.port);
-        o.set_keep_alive(Duration::from_secs(30))
-            .set_clean_session(false)
-            .set_manual_acks(true)
-            // The largest record plus the header and the packet's own bytes.
-            .set_max_packet_size(max_payload + (64 << 10), 64 << 10);
-        if let Some(user) = &self.username {
-            o.set_credentials(user, self.password.clone().unwrap_or_default());
-        }
-        o
-    }
-}
-
-/// The MQTT series of `/metrics`.
-#[derive(Default)]
-pub struct MqttMetrics {
-    enabled: AtomicBool,
-    connected: AtomicBool,
-    connections: AtomicU64,
-    messages: Mutex<BTreeMap<&'static str, u64>>,
-}
-
-impl MqttMetrics {
-    fn message(&self, outcome: &'static str) {
-        *self.messages.lock().unwrap().entry(outcome).or_default() += 1;
-    }
-
-    fn set_connected(&self, up: bool) {
-        self.connected.store(up, Ordering::Relaxed);
-    }
-
-    /// The series, when MQTT ingest is on.
-    pub fn render(&self, o: &mut String) {
-        if !self.enabled.load(Ordering::Relaxed) {
-            return;
-        }
-        let _ = writeln!(
-            o,
-            "# HELP gearwear_mqtt_connected 1 while connected and subscribed to the broker."
-        );
-        let _ = writeln!(o, "# TYPE gearwear_mqtt_connected gauge");
-        let _ = writeln!(
-            o,
-            "gearwear_mqtt_connected {}",
-            self.connected.load(Ordering::Relaxed) as u8
-        );
-        let _ = writeln!(
-            o,
-            "# HELP gearwear_mqtt_connections_total Connections made to the broker."
-        );
-        let _ = writeln!(o, "# TYPE gearwear_mqtt_connections_total counter");
-        let _ = writeln!(
-            o,
-            "gearwear_mqtt_connections_total {}",
-            self.connections.load(Ordering::Relaxed)
-        );
-        let _ = writeln!(
-            o,
-            "# HELP gearwear_mqtt_messages_total MQTT messages by outcome (stored, duplicate, \
-             refused)."
-        );
-        let _ = writeln!(o, "# TYPE gearwear_mqtt_messages_total counter");
-        for (k, n) in self.messages.lock().unwrap().iter() {
-            let _ = writeln!(o, "gearwear_mqtt_messages_total{{outcome=\"{k}\"}} {n}");
-        }
-    }
+    o
 }
 
 /// Subscribe and ingest until `stop` turns true; then let the records in flight finish (and
@@ -181,7 +74,7 @@ pub async fn run(app: AppState, s: MqttSettings, mut stop: watch::Receiver<bool>
     let metrics = &app.metrics.mqtt;
     metrics.enabled.store(true, Ordering::Relaxed);
     let max_payload = app.settings.limits.max_body_bytes;
-    let (client, mut events) = AsyncClient::new(s.options(max_payload), 64);
+    let (client, mut events) = AsyncClient::new(options(&s, max_payload), 64);
     let mut tasks = JoinSet::new();
     let ingesting = Arc::new(Semaphore::new(CONCURRENT_RECORDS));
     let mut backoff = MIN_BACKOFF;

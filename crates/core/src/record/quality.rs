@@ -18,8 +18,7 @@
 //! | dropout | a run of at least [`DROPOUT_MIN_RUN`] samples of one exact value | refused |
 //! | DC step | the means before and after one sample differ by more than [`DC_STEP_SIGMAS`] σ_r and [`DC_STEP_NOISE`] standard errors (both sides at least 10 % of the record) | refused |
 
-use serde::Serialize;
-
+pub use super::finding::QualityFinding;
 use crate::error::{Error, Result};
 use crate::signal::velocity::Kinematic;
 use crate::units::ChannelUnit;
@@ -49,26 +48,6 @@ pub const MAX_VELOCITY_SI: f64 = 10.0;
 /// Repaired samples, as a fraction of the record, up to which the alert stands (the repair
 /// changes the record's energy by at most this fraction of the local level).
 pub const REPAIR_KEEPS_ALERT_FRACTION: f64 = 1e-4;
-
-/// One defect found in a record: what, where (0-based samples `first..=last`, seconds from the
-/// record's start), and what was done.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct QualityFinding {
-    /// `spike`, `impulses`, `absurd-value`, `dropout`, `dc-step` or `sample-rate`.
-    pub defect: &'static str,
-    /// The channel, in a record of several channels.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub channel: Option<String>,
-    pub first_sample: usize,
-    pub last_sample: usize,
-    /// `first_sample / fs`, s.
-    pub start_s: f64,
-    /// `(last_sample + 1) / fs`, s.
-    pub end_s: f64,
-    /// `repaired`, `refused` or `warned`.
-    pub action: &'static str,
-    pub message: String,
-}
 
 /// What [`inspect`] found in one channel: the repairable findings and the spans to repair.
 #[derive(Debug, Clone, Default, PartialEq)]
