@@ -228,9 +228,13 @@ pub async fn accept(
             policy: app.settings.alerts,
         }),
     };
-    // The webhook payloads carry the machine's wear trend with this record in it.
-    let trend = super::trend::summary_with(app, &ing.diagnosis).await;
-    ing.event_extras.insert("trend_summary".into(), trend);
+    // The webhook payloads carry the machine's wear trend with this record in it: a read of
+    // the history and a bootstrapped fit (≈ 10 ms of CPU at 200 points), so only when a
+    // webhook will receive a diagnosis payload.
+    if super::trend::payloads_wanted(app).await {
+        let trend = super::trend::summary_with(app, &ing.diagnosis).await;
+        ing.event_extras.insert("trend_summary".into(), trend);
+    }
     clock.lap("assemble");
     if let Some(prev) = store(app, ing, idem).await? {
         return Ok(Accepted::Replayed(prev));

@@ -230,6 +230,23 @@ pub fn wear_summary(app: &AppState, rows: &[DiagnosisRow]) -> Value {
     a
 }
 
+/// Does any webhook subscribe to an event whose payload carries the `trend_summary`
+/// (`diagnosis.created`, `wear.threshold_crossed`, or `*`)? True when the list cannot be read
+/// (the payloads are then complete; the cost is only CPU).
+pub async fn payloads_wanted(app: &AppState) -> bool {
+    match app.store.list_webhooks().await {
+        Ok(hooks) => hooks.iter().any(|h| {
+            h.events.iter().any(|e| {
+                matches!(
+                    e.as_str(),
+                    "diagnosis.created" | "wear.threshold_crossed" | "*"
+                )
+            })
+        }),
+        Err(_) => true,
+    }
+}
+
 /// The machine's wear `trend_summary` with a new diagnosis in it (not stored yet): the latest
 /// stored diagnoses by measurement time plus this one, for the record's webhook payloads.
 /// Null when the history cannot be read (the record is still stored; its payloads then lack
