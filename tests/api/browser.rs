@@ -54,6 +54,12 @@ impl Driver {
         .await
     }
 
+    /// Navigate the browser to `url` (WebDriver `POST /url`).
+    pub async fn open(&self, url: &str) {
+        self.cmd(reqwest::Method::POST, "/url", Some(json!({ "url": url })))
+            .await;
+    }
+
     pub async fn wait_for(&self, what: &str, js: &str) -> Value {
         let t = Instant::now();
         loop {
@@ -155,12 +161,7 @@ async fn dashboard_updates_when_a_record_arrives() {
     let Some((d, profile)) = start_driver().await else {
         return;
     };
-    d.cmd(
-        reqwest::Method::POST,
-        "/url",
-        Some(json!({"url": app.url("/")})),
-    )
-    .await;
+    d.open(&app.url("/")).await;
     d.wait_for(
         "its first poll",
         "return document.getElementById('status').textContent.startsWith('updated')",
@@ -287,12 +288,7 @@ async fn dashboard_asks_for_a_read_key() {
         app.post_json("gearbox-k", &json_record(3)).await.status(),
         201
     );
-    d.cmd(
-        reqwest::Method::POST,
-        "/url",
-        Some(json!({"url": app.url("/")})),
-    )
-    .await;
+    d.open(&app.url("/")).await;
     d.wait_for(
         "the key prompt",
         "return !document.getElementById('keyform').hidden",
@@ -473,12 +469,7 @@ async fn dashboard_shows_the_fleet_by_severity_and_a_machine_from_the_url() {
         return;
     };
     // Opened from the URL (the query form, rewritten to the hash form).
-    d.cmd(
-        reqwest::Method::POST,
-        "/url",
-        Some(json!({"url": app.url("/?machine=real-broken")})),
-    )
-    .await;
+    d.open(&app.url("/?machine=real-broken")).await;
     d.wait_for(
         "real-broken opened from the URL",
         "return document.getElementById('machine-name').textContent === 'real-broken' && \

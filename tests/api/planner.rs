@@ -145,12 +145,7 @@ async fn the_planner_reads_the_fleet_by_urgency() {
     let Some((d, profile)) = start_driver().await else {
         return;
     };
-    d.cmd(
-        reqwest::Method::POST,
-        "/url",
-        Some(json!({"url": app.url("/")})),
-    )
-    .await;
+    d.open(&app.url("/")).await;
     let rows = d
         .wait_for(
             "the four machines in the overview",
@@ -316,12 +311,7 @@ async fn deep_links_open_a_machine_and_a_record(
     app: &TestApp,
     views: &Value,
 ) {
-    d.cmd(
-        reqwest::Method::POST,
-        "/url",
-        Some(json!({"url": app.url("/#/machines/press-trend")})),
-    )
-    .await;
+    d.open(&app.url("/#/machines/press-trend")).await;
     let page = d
         .wait_for(
             "press-trend's page with its plot",
@@ -389,11 +379,10 @@ async fn deep_links_open_a_machine_and_a_record(
         "{rec}"
     );
     // The same record by its record id, as a URL (alerts and trend points link so).
-    d.cmd(
-        reqwest::Method::POST,
-        "/url",
-        Some(json!({"url": app.url(&format!("/#/records/{}", latest["record_id"].as_str().unwrap()))})),
-    )
+    d.open(&app.url(&format!(
+        "/#/records/{}",
+        latest["record_id"].as_str().unwrap()
+    )))
     .await;
     d.wait_for(
         "the record by its record id",
