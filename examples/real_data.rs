@@ -5,6 +5,8 @@
 //! ```sh
 //! cargo run --release --example real_data                 # both datasets
 //! cargo run --release --example real_data -- helical      # the PHM 2009 helical records only
+//! cargo run --release --example real_data -- spur         # the PHM 2009 spur records only
+//! cargo run --release --example real_data -- phm          # both PHM 2009 trains
 //! cargo run --release --example real_data -- a1 a3        # SpectraQuest, some channels
 //! ```
 //! Env: `GFD_DIR` (default `../shared/data/spectraquest-gfd` next to the crate),
@@ -76,18 +78,29 @@ fn f2(v: Option<f64>) -> String {
     v.map_or("–".into(), |v| format!("{v:.2}"))
 }
 
-#[path = "real_data/helical.rs"]
-mod helical;
+#[path = "real_data/phm.rs"]
+mod phm;
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    if args.first().map(String::as_str) == Some("helical") {
-        helical::run();
+    let trains: Vec<&phm::Train> = match args.first().map(String::as_str) {
+        Some("helical") => vec![&phm::HELICAL],
+        Some("spur") => vec![&phm::SPUR],
+        Some("phm") => vec![&phm::HELICAL, &phm::SPUR],
+        _ => Vec::new(),
+    };
+    if !trains.is_empty() {
+        let summary: Vec<String> = trains.into_iter().flat_map(phm::run).collect();
+        phm::print_summary(&summary);
         return;
     }
     spectraquest(args.clone());
     if args.is_empty() {
-        helical::run();
+        let summary: Vec<String> = [&phm::HELICAL, &phm::SPUR]
+            .into_iter()
+            .flat_map(phm::run)
+            .collect();
+        phm::print_summary(&summary);
     }
 }
 

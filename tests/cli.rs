@@ -441,7 +441,7 @@ fn helical_csv(path: &std::path::Path, f: f64, seed: u64, impacts: f64) {
 
 /// `diagnose --baseline-manifest` with a tachometer: the speed is counted from the pulses,
 /// the record is judged against healthy records at its speed and load, a healthy one is not
-/// anomalous, one with impacts once per idler revolution gets findings that name a part, and
+/// anomalous, one with impacts once per idler revolution gets findings led by a gear on the idler, and
 /// one at a speed the baseline lacks is `unknown`, naming the missing state. Without a
 /// signature table for the gearbox the answer has no wear figure and says why.
 #[test]
@@ -528,11 +528,16 @@ fn diagnose_judges_each_record_at_its_operating_state() {
     );
     let f = v["findings"].as_array().unwrap();
     assert!(!f.is_empty(), "{v}");
+    // Impacts once per idler revolution: a gear on the idler, with local damage, first.
+    assert_eq!(f[0]["kind"], "gear-local-damage", "{v}");
+    assert_eq!(f[0]["shaft"], "idler", "{v}");
     for x in f {
         assert!(
             x["kind"].is_string() && x["strength"].as_f64().unwrap() >= 3.0,
             "{x}"
         );
+        let share = x["share"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&share), "{x}");
         assert!(!x["evidence"].as_array().unwrap().is_empty(), "{x}");
     }
 

@@ -71,7 +71,9 @@ use crate::{Error, Result};
 pub const MIN_BASELINE_RECORDS: usize = 3;
 /// The scoring constants both baselines share (the state-aware one of [`crate::condition`] and
 /// this pooled one).
-pub use crate::condition::baseline::{MIN_THRESHOLD, SCALE_FLOOR, TOP_K};
+pub use crate::condition::calibration::{MIN_THRESHOLD, TOP_K};
+/// Smallest robust scale of a feature (ln units: a 10 % change).
+pub const SCALE_FLOOR: f64 = 0.1;
 
 /// What a baseline is made of: the features of one record (one channel).
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
@@ -92,6 +94,14 @@ pub struct RecordFeatures {
     /// compares.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub evidence: BTreeMap<String, f64>,
+    /// Each evidence feature's noise in the record, from its segments
+    /// ([`crate::condition::Evidence::spread`]).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub evidence_spread: BTreeMap<String, f64>,
+    /// [`crate::condition::EVIDENCE_VERSION`] of `evidence` (0: before versions): a baseline
+    /// fits only records of the current one.
+    #[serde(default)]
+    pub evidence_version: u32,
 }
 
 impl RecordFeatures {

@@ -8,8 +8,8 @@ use serde::Serialize;
 
 use super::{Machine, RecordFacts};
 use crate::condition::{
-    Finding, OperatingState, Parts, StateBaseline, StateRecord, StateScore, Tacho, evidence,
-    findings, measure,
+    EVIDENCE_VERSION, Finding, OperatingState, Parts, StateBaseline, StateRecord, StateScore,
+    Tacho, evidence, findings, measure,
 };
 use crate::novelty::{FeatureZ, MachineBaseline, Novelty, OrderAnalysis, RecordFeatures};
 use crate::record::Record;
@@ -155,7 +155,14 @@ pub fn add_evidence(
         return;
     };
     match evidence(&rec.samples, rec.sample_rate, angle, parts, order) {
-        Ok(ev) => features.evidence = ev,
+        Ok(ev) => {
+            features.evidence = ev.values;
+            features.evidence_spread = ev.spread;
+            features.evidence_version = crate::condition::EVIDENCE_VERSION;
+            if let (Some(note), Some(o)) = (ev.note, features.indicators.as_object_mut()) {
+                o.insert("evidence_note".into(), note.into());
+            }
+        }
         Err(e) => {
             if let Some(o) = features.indicators.as_object_mut() {
                 o.insert("evidence_error".into(), e.to_string().into());
@@ -185,7 +192,7 @@ pub fn judge(
         return None;
     }
     Some(baseline.score(state, &features.evidence).map(|s| Judged {
-        findings: findings(&s, parts),
+        findings: findings(&s, parts, None),
         novelty: novelty_of(&s, baseline),
         judgement: judgement_of(&s),
     }))
@@ -225,29 +232,31 @@ fn judgement_of(s: &StateScore) -> StateJudgement {
 pub fn state_baseline(features: &[RecordFeatures]) -> Option<Result<StateBaseline>> {
     let recs: Vec<StateRecord> = features
         .iter()
-        .filter(|f| !f.evidence.is_empty())
+        .filter(|f| !f.evidence.is_empty() && f.evidence_version == EVIDENCE_VERSION)
         .filter_map(|f| {
             Some(StateRecord {
                 state: f.state.clone()?,
                 values: f.evidence.clone(),
+                spread: f.evidence_spread.clone(),
             })
         })
         .collect();
     (recs.len() >= crate::condition::baseline::MIN_STATE_RECORDS).then(|| StateBaseline::fit(recs))
 }
 
+/// A machine's fitted baselines by channel: the pooled ones, the state-aware ones (where the
+/// records carry states) and the number of baseline records.
+pub type Baselines = (
+    BTreeMap<String, MachineBaseline>,
+    BTreeMap<String, StateBaseline>,
+    BTreeMap<String, usize>,
+);
+
 /// A machine's baselines from its baseline records' features by channel: the pooled one and,
 /// where the records carry states, the state-aware one; with the records per channel.
 ///
 /// Errors: a channel with fewer records than a baseline needs.
-#[allow(clippy::type_complexity)]
-pub fn fit_baselines(
-    by_channel: &BTreeMap<String, Vec<RecordFeatures>>,
-) -> Result<(
-    BTreeMap<String, MachineBaseline>,
-    BTreeMap<String, StateBaseline>,
-    BTreeMap<String, usize>,
-)> {
+pub fn fit_baselines(by_channel: &BTreeMap<String, Vec<RecordFeatures>>) -> Result<Baselines> {
     let mut pooled = BTreeMap::new();
     let mut states = BTreeMap::new();
     let mut counts = BTreeMap::new();

@@ -34,7 +34,9 @@ use serde::Serialize;
 use serde_json::Value;
 
 pub use alert::{Alert, Thresholds, alert, deciding, severity};
-pub use condition::{Measured, StateJudgement, TachoChannel, fit_baselines, state_baseline};
+pub use condition::{
+    Baselines, Measured, StateJudgement, TachoChannel, fit_baselines, state_baseline,
+};
 pub use diagnoser::{
     CalibrationUse, MachineCalibration, PathCorrection, TableDiagnoser, TableReading, WearInterval,
 };

@@ -12,40 +12,24 @@
 //!
 //! Nearest healthy records, not a fitted curve of speed: a line's amplitude crosses
 //! resonances as the speed changes, which no low-order curve follows, and a baseline usually
-//! holds one or two records per state (the helical data: one per speed and load).
+//! holds one or two records per state (the PHM 2009 data: one per speed and load).
 //!
-//! # Scale and threshold (leave-one-out that respects states)
-//! Each baseline record is predicted from the others, twice:
-//! * **within** its state: from the other records of its state and load (when it has some):
-//!   their spread is the repeatability, what a record judged **at a baseline state** differs
-//!   by;
-//! * **across** states: with every record of its state left out, from the neighbouring speeds
-//!   (rules 2–3, the nearest at any distance when no interpolation reaches): the spread then
-//!   includes the change between speeds, what a record judged **between baseline states**
-//!   differs by.
-//!
-//! For each, per feature, the scale is `max(1.4826 · MAD, 0.1)` of the residuals (the 0.1
-//! floor: a 10 % change) and the threshold the largest leave-one-out score (at least 3); a
-//! record's `z` per feature is `(value − reference) / scale`, its **score** the RMS of its
-//! [`TOP_K`] largest `|z|` (as [`crate::novelty`]). A record at a baseline state is judged with
-//! the *within* calibration, any other with the *across* one. A baseline of one record per
-//! state has no *within* residuals and uses *across* for both: its scale and threshold then
-//! include the change from one speed to the next, and err towards missing a small change
-//! rather than raising a false alarm; one of a single state uses *within* for both.
+//! # Scale and threshold
+//! A record at a baseline state is judged with the repeatability of that state — its
+//! records' own noise (from their segments) and the spread between runs — and a record between
+//! states with the spread of the baseline's leave-state-out predictions as well
+//! ([`super::calibration`] has the equations). A record's `z` per feature is
+//! `(value − reference) / scale`, its **score** the RMS of its [`TOP_K`] largest `|z|`; it is
+//! anomalous above the threshold.
 
 use serde::{Deserialize, Serialize};
 
+pub use super::calibration::{Departure, MIN_THRESHOLD, TOP_K};
+use super::calibration::{Within, across_scales, across_spread, departures, score_of, threshold};
 use super::state::{Load, OperatingState};
-use crate::signal::median;
 use crate::{Error, Result};
 use std::collections::BTreeMap;
 
-/// Smallest robust scale of a feature (ln units).
-pub const SCALE_FLOOR: f64 = 0.1;
-/// Number of largest |z| the score averages (in square).
-pub const TOP_K: usize = 3;
-/// Smallest threshold: a record is never anomalous with its top features within 3 scales.
-pub const MIN_THRESHOLD: f64 = 3.0;
 /// Records within this relative speed difference are at the same state.
 pub const SAME_STATE: f64 = 0.03;
 /// Largest ratio of the two speeds an interpolation may span.
@@ -55,11 +39,14 @@ pub const NEAR: f64 = 0.08;
 /// Fewest baseline records with a state.
 pub const MIN_STATE_RECORDS: usize = 3;
 
-/// A healthy record: its state and evidence features.
+/// A healthy record: its state, evidence features and their noise in it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StateRecord {
     pub state: OperatingState,
     pub values: BTreeMap<String, f64>,
+    /// Each feature's noise in the record ([`super::evidence::Evidence::spread`]).
+    #[serde(default)]
+    pub spread: BTreeMap<String, f64>,
 }
 
 /// What a baseline covers at one load.
@@ -91,15 +78,6 @@ pub struct Reference {
     pub how: &'static str,
 }
 
-/// One feature's departure from the reference.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Departure {
-    pub feature: String,
-    /// `value − reference` (ln units: a ratio).
-    pub change: f64,
-    pub z: f64,
-}
-
 /// A record judged against its state's reference.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct StateScore {
@@ -121,10 +99,16 @@ pub struct StateScore {
 #[derive(Debug, Clone, PartialEq)]
 pub struct StateBaseline {
     records: Vec<StateRecord>,
-    /// For a record at a baseline state: from records predicted by others of their state.
-    within: Calibration,
-    /// For a record between baseline states: from records predicted by other states.
-    across: Calibration,
+    /// The repeatability at a state.
+    within: Within,
+    /// Threshold of a record at a baseline state.
+    within_threshold: f64,
+    /// The scores its threshold was checked against (records predicted by others of their
+    /// state).
+    within_scores: Vec<f64>,
+    /// Scales of a record between baseline states.
+    across: BTreeMap<String, f64>,
+    across_threshold: f64,
 }
 
 fn candidates<'a>(records: &'a [StateRecord], load: Option<&Load>) -> Vec<&'a StateRecord> {
@@ -194,51 +178,6 @@ fn reference(cands: &[&StateRecord], f: f64, any_distance: bool) -> Option<Refer
     })
 }
 
-/// Per-feature robust scales (`max(1.4826 · MAD, floor)`) of a set of residuals (features
-/// with at least [`MIN_STATE_RECORDS`] residuals), the residuals' leave-one-out scores at
-/// those scales, and the threshold (the largest score, at least 3). `None` with fewer than
-/// [`MIN_STATE_RECORDS`] residuals.
-fn calibrate(residuals: &[BTreeMap<String, f64>]) -> Option<Calibration> {
-    let residuals: Vec<&BTreeMap<String, f64>> =
-        residuals.iter().filter(|r| !r.is_empty()).collect();
-    if residuals.len() < MIN_STATE_RECORDS {
-        return None;
-    }
-    let mut per: BTreeMap<String, Vec<f64>> = BTreeMap::new();
-    for r in &residuals {
-        for (k, v) in *r {
-            per.entry(k.clone()).or_default().push(*v);
-        }
-    }
-    let scale: BTreeMap<String, f64> = per
-        .into_iter()
-        .filter(|(_, v)| v.len() >= MIN_STATE_RECORDS)
-        .map(|(k, mut v)| {
-            let m = median(&mut v);
-            let mut dev: Vec<f64> = v.iter().map(|x| (x - m).abs()).collect();
-            (k, (1.4826 * median(&mut dev)).max(SCALE_FLOOR))
-        })
-        .collect();
-    let loo_scores: Vec<f64> = residuals
-        .iter()
-        .map(|r| score_of(&departures(r, &scale)))
-        .collect();
-    let threshold = loo_scores.iter().fold(MIN_THRESHOLD, |a, &b| a.max(b));
-    Some(Calibration {
-        scale,
-        threshold,
-        loo_scores,
-    })
-}
-
-/// Scales and threshold for one kind of reference.
-#[derive(Debug, Clone, PartialEq)]
-struct Calibration {
-    scale: BTreeMap<String, f64>,
-    threshold: f64,
-    loo_scores: Vec<f64>,
-}
-
 impl StateBaseline {
     /// Fit from healthy records with their states (at least [`MIN_STATE_RECORDS`]).
     pub fn fit(records: Vec<StateRecord>) -> Result<StateBaseline> {
@@ -250,24 +189,44 @@ impl StateBaseline {
             )));
         }
         let n = records.len();
-        let by_state: Vec<_> = (0..n).map(|i| loo_residual(&records, i, true)).collect();
-        let by_record: Vec<_> = (0..n).map(|i| loo_residual(&records, i, false)).collect();
-        let (across, within) = match (calibrate(&by_state), calibrate(&by_record)) {
-            (Some(a), Some(w)) => (a, w),
-            (Some(a), None) => (a.clone(), a),
-            (None, Some(w)) => (w.clone(), w),
-            (None, None) => {
-                return Err(Error::Signal(
-                    "the baseline's records cannot predict one another (fewer than 3 have a \
-                     neighbour of their load): add healthy records"
-                        .into(),
-                ));
-            }
-        };
+        let same_state: Vec<_> = (0..n).map(|i| loo_residual(&records, i, false)).collect();
+        let other_states: Vec<_> = (0..n).map(|i| loo_residual(&records, i, true)).collect();
+        let spreads: Vec<&BTreeMap<String, f64>> = records
+            .iter()
+            .map(|r| &r.spread)
+            .filter(|h| !h.is_empty())
+            .collect();
+        let spread_across = across_spread(&other_states);
+        let within = Within::fit(&spreads, &same_state, &spread_across);
+        if within.noise.is_empty() && other_states.iter().all(|r| r.is_empty()) {
+            return Err(Error::Signal(
+                "the baseline's records carry no measure of their repeatability (records too \
+                 short for two segments) and cannot predict one another (fewer than 3 have a \
+                 neighbour of their load): add longer healthy records"
+                    .into(),
+            ));
+        }
+        let wscales = within.scales();
+        let within_scores: Vec<f64> = same_state
+            .iter()
+            .filter(|r| !r.is_empty())
+            .map(|r| score_of(&departures(r, &zeros(r), |k| wscales.get(k).copied())))
+            .collect();
+        let within_threshold = threshold(wscales.len(), &within_scores);
+        let across = across_scales(&wscales, &spread_across);
+        let across_scores: Vec<f64> = other_states
+            .iter()
+            .filter(|r| !r.is_empty())
+            .map(|r| score_of(&departures(r, &zeros(r), |k| across.get(k).copied())))
+            .collect();
+        let across_threshold = threshold(across.len(), &across_scores);
         Ok(StateBaseline {
             records,
             within,
+            within_threshold,
+            within_scores,
             across,
+            across_threshold,
         })
     }
 
@@ -346,17 +305,20 @@ impl StateBaseline {
         values: &BTreeMap<String, f64>,
     ) -> std::result::Result<StateScore, String> {
         let r = self.reference(state)?;
-        let cal = if r.how == "same-state" {
-            &self.within
+        let same = r.how == "same-state" && !self.within.noise.is_empty();
+        let n = r.from_hz.len();
+        let (d, threshold) = if same {
+            let d = departures(values, &r.values, |k| self.within.scale(k, n));
+            (d, self.within_threshold)
         } else {
-            &self.across
+            let d = departures(values, &r.values, |k| self.across.get(k).copied());
+            (d, self.across_threshold)
         };
-        let d = departures(&residual(values, &r.values), &cal.scale);
         let score = score_of(&d);
         Ok(StateScore {
             score,
-            threshold: cal.threshold,
-            anomalous: score > cal.threshold,
+            threshold,
+            anomalous: score > threshold,
             reference: r.how,
             reference_hz: r.from_hz,
             top: d.iter().take(TOP_K).cloned().collect(),
@@ -366,24 +328,48 @@ impl StateBaseline {
 
     /// The threshold of a record at a baseline state.
     pub fn threshold(&self) -> f64 {
-        self.within.threshold
+        self.within_threshold
     }
 
-    /// The leave-one-out scores the same-state threshold comes from.
+    /// The healthy comparisons the same-state threshold was checked against (records predicted
+    /// by others of their state).
     pub fn loo_scores(&self) -> &[f64] {
-        &self.within.loo_scores
+        &self.within_scores
     }
 
     pub fn records(&self) -> usize {
         self.records.len()
     }
+
+    /// Per feature: a record's own noise `σ`, the between-run spread where measured and the
+    /// scale between states (ln units) — what the yardstick is made of, for people.
+    pub fn spreads(&self) -> Vec<(String, f64, Option<f64>, Option<f64>)> {
+        self.within
+            .noise
+            .iter()
+            .map(|(k, h)| {
+                (
+                    k.clone(),
+                    *h,
+                    self.within.between.get(k).copied(),
+                    self.across.get(k).copied(),
+                )
+            })
+            .collect()
+    }
+}
+
+/// A map of zeros with the keys of `r` (the reference of a residual).
+fn zeros(r: &BTreeMap<String, f64>) -> BTreeMap<String, f64> {
+    r.keys().map(|k| (k.clone(), 0.0)).collect()
 }
 
 /// Record `i`'s residual from a reference made without it: `whole_state` — without every
 /// record of its state and load (how a record between baseline speeds is judged; the nearest
 /// record at any distance when no interpolation reaches); else without it alone, and only
-/// when its state has other records (how a record at a baseline state is judged). Empty when
-/// there is no such reference.
+/// when its state has other records (how a record at a baseline state is judged), divided by
+/// `√(1 + 1/m)` for a reference of `m` records (a between-run spread). Empty when there is no
+/// such reference.
 fn loo_residual(records: &[StateRecord], i: usize, whole_state: bool) -> BTreeMap<String, f64> {
     let me = &records[i];
     let f = me.state.shaft_hz;
@@ -402,7 +388,11 @@ fn loo_residual(records: &[StateRecord], i: usize, whole_state: bool) -> BTreeMa
         .collect();
     let cands = candidates(&others, me.state.load.as_ref());
     match reference(&cands, f, whole_state) {
-        Some(r) if whole_state || r.how == "same-state" => residual(&me.values, &r.values),
+        Some(r) if whole_state => residual(&me.values, &r.values, 1.0),
+        Some(r) if r.how == "same-state" => {
+            let m = r.from_hz.len() as f64;
+            residual(&me.values, &r.values, (1.0 + 1.0 / m).sqrt())
+        }
         _ => BTreeMap::new(),
     }
 }
@@ -410,35 +400,12 @@ fn loo_residual(records: &[StateRecord], i: usize, whole_state: bool) -> BTreeMa
 fn residual(
     values: &BTreeMap<String, f64>,
     reference: &BTreeMap<String, f64>,
+    over: f64,
 ) -> BTreeMap<String, f64> {
     values
         .iter()
-        .filter_map(|(k, v)| reference.get(k).map(|r| (k.clone(), v - r)))
+        .filter_map(|(k, v)| reference.get(k).map(|r| (k.clone(), (v - r) / over)))
         .collect()
-}
-
-/// Departures with their z (features with a scale only), largest `|z|` first.
-fn departures(residual: &BTreeMap<String, f64>, scale: &BTreeMap<String, f64>) -> Vec<Departure> {
-    let mut d: Vec<Departure> = residual
-        .iter()
-        .filter_map(|(k, c)| {
-            scale.get(k).map(|s| Departure {
-                feature: k.clone(),
-                change: *c,
-                z: c / s,
-            })
-        })
-        .collect();
-    d.sort_by(|a, b| b.z.abs().total_cmp(&a.z.abs()));
-    d
-}
-
-fn score_of(d: &[Departure]) -> f64 {
-    let top: Vec<f64> = d.iter().take(TOP_K).map(|x| x.z * x.z).collect();
-    if top.is_empty() {
-        return 0.0;
-    }
-    (top.iter().sum::<f64>() / top.len() as f64).sqrt()
 }
 
 #[cfg(test)]
@@ -456,6 +423,15 @@ mod tests {
                 load: Load::parse(load),
             },
             values: BTreeMap::from([("a".to_string(), v), ("b".to_string(), 0.0)]),
+            spread: BTreeMap::new(),
+        }
+    }
+
+    /// [`rec`] with its own noise `d` in both features.
+    fn rec_noisy(f: f64, load: &str, v: f64, d: f64) -> StateRecord {
+        StateRecord {
+            spread: BTreeMap::from([("a".to_string(), d), ("b".to_string(), d)]),
+            ..rec(f, load, v)
         }
     }
 
@@ -508,7 +484,8 @@ mod tests {
             for run in 0..2 {
                 let bend = 0.02 * (f - 40.0f64).powi(2);
                 let noise = 0.02 * ((k * 2 + run) as f64 * 1.7).sin();
-                recs.push(rec(*f, "High", bend + noise));
+                let d = 0.02 + 0.01 * ((k * 2 + run) as f64 * 2.3).cos();
+                recs.push(rec_noisy(*f, "High", bend + noise, d));
             }
         }
         let b = StateBaseline::fit(recs).unwrap();

@@ -1,47 +1,61 @@
-//! Speed-free evidence of one record (one channel), per shaft, mesh and bearing.
+//! Speed-free evidence of one record (one channel), per line class and region of the order
+//! spectrum ([`super::lines`]), per bearing and per shaft.
 //!
-//! The record is resampled to `P` samples per revolution of the input shaft from its measured
-//! angle ([`crate::signal::order::angular_resample`]), over a whole number of revolutions `R`;
-//! its Hann amplitude spectrum is then a spectrum in **orders** (multiples of the input rate)
-//! with resolution `1/R`, and a line of a shaft or a mesh sits at the same order at every
-//! speed. Every feature is a natural logarithm, so a change reads as a ratio
-//! (`Δ = 0.115` ≈ 1 dB of amplitude):
+//! The record is resampled to `p` samples per revolution of the input shaft from its measured
+//! angle ([`crate::signal::order::angular_resample`]), over a whole number of common periods
+//! ([`super::lines::LineMap::layout`]); its Hann amplitude spectrum is then a spectrum in
+//! **orders** on which every shaft's harmonics fall on bins. Every feature is a natural
+//! logarithm of an amplitude (the square root of a class's energy), so a change reads as a
+//! ratio (`Δ = 0.115` ≈ 1 dB):
 //!
 //! | feature | what it is | what raises it |
 //! | --- | --- | --- |
-//! | `mesh<i>.h<k>` | amplitude of the k-th harmonic of stage i's mesh | wear, load |
-//! | `mesh<i>.h<k>.sb.<s>` | RMS of the sidebands `k·O_i ± j·r_s` at the first three multiples j of shaft s's rate that only s makes | a gear on s modulating the mesh: local damage, eccentricity |
-//! | `shaft.<s>.1x`, `.2x` | amplitude at 1× and 2× shaft s's rate | imbalance, bent shaft (1×), misalignment (2×) |
-//! | `tsa.<s>.fm4`, `na4`, `m6a`, `kurtosis`, `er` | metrics of s's time-synchronous average ([`crate::signal::tsa`]) | a once-per-revolution impact of a damaged tooth on s |
-//! | `env.<s>` | envelope spectrum at the first three multiples of r_s that only s makes | impacts once per revolution of s |
-//! | `bearing.<b>.<defect>` | envelope spectrum at 1..3 × the defect order (±1 %, rolling elements slip) | a bearing defect: `bpfo` outer race, `bpfi` inner race, `bsf` ball, `ftf` cage |
+//! | `lines.<class>.<region>` | energy of a line class in a region ([`super::lines`]) | `own.S`: a fault once per revolution of `S`; `shared`: any shaft; `mesh`: load, wear, path; `none`: non-synchronous vibration |
+//! | `shaft.<S>.1x`, `.2x` | the shaft's 1× and 2× lines | imbalance, bent shaft (1×), misalignment (2×) |
+//! | `env.own.<S>`, `env.shared`, `env.none` | the same classes in the envelope spectrum's low orders | impacts once per revolution of `S`; non-synchronous impacts |
 //! | `env.level` | RMS of the envelope band | any impacting |
+//! | `bearing.<b>.<defect>` | envelope spectrum at 1..3 × the defect order (±1 %, rolling elements slip) | a bearing defect: `bpfo` outer race, `bpfi` inner race, `bsf` ball |
+//! | `tsa.<S>.fm4`, `na4`, `m6a`, `kurtosis`, `er` | metrics of `S`'s time-synchronous average ([`crate::signal::tsa`]) | a local tooth fault (impulsiveness) |
 //! | `stat.rms`, `stat.kurtosis` | of the raw record | anything |
 //!
-//! A line counts for a shaft only where no faster shaft also puts one ([`specific_to`]: in a
-//! train of commensurate rates, a slower shaft's comb contains the faster shafts' harmonics),
-//! and a sideband that falls on a mesh harmonic is left out (it would be counted for the
-//! wrong part). A bearing harmonic that a bearing of another shaft shares is left out of that
-//! bearing's sum for the same reason. The envelope band
-//! spans from 3.5 × the highest mesh order (above the mesh harmonics that dominate the raw
-//! spectrum) to 0.45 × the sample rate.
+//! A bearing harmonic that a bearing of another shaft shares is left out of both bearings'
+//! sums (it would name the wrong one). The envelope band spans from just above the mesh
+//! regions ([`super::lines::MESH_REGION_ORDERS`] × the highest mesh order, where the mesh
+//! harmonics dominate) to 0.45 × the sample rate.
+//!
+//! # Repeatability within the record
+//! The same features are computed on the record's quarters (each a whole number of common
+//! periods; halves when fewer than four periods fit): their spread is the record's own
+//! repeatability, from which a baseline scales a feature's change at a state
+//! ([`super::calibration`]).
 
 use std::collections::BTreeMap;
 
 use rustfft::num_complex::Complex64;
 
+use super::lines::{Layout, LineMap};
 use super::parts::Parts;
 use crate::Result;
 use crate::signal::order::{ShaftAngle, angular_resample, samples_per_rev_for};
-use crate::signal::tsa::OrderAnalysis;
+use crate::signal::tsa::{OrderAnalysis, ShaftTrain, order_analysis_at};
 use crate::signal::{PlanCache, Spectrum, Window, amplitude_spectrum, kurtosis, rms};
 
-/// Sideband orders j = 1..=SIDEBANDS around a mesh harmonic.
-const SIDEBANDS: usize = 3;
-/// Mesh harmonics k = 1..=MESH_HARMONICS.
-const MESH_HARMONICS: usize = 3;
 /// Highest order kept, relative to the record's Nyquist order.
 const NYQUIST_SHARE: f64 = 0.9;
+/// Relative tolerance of a bearing line (its rolling elements slip).
+const BEARING_SLIP: f64 = 0.01;
+/// Version of the features' definitions: a baseline fits only records of its own version.
+pub const EVIDENCE_VERSION: u32 = 2;
+
+/// A channel's evidence: the features of the whole record and each feature's noise in it,
+/// from its spread over the record's segments (ln units).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Evidence {
+    pub values: BTreeMap<String, f64>,
+    pub spread: BTreeMap<String, f64>,
+    /// Why the record's own resolution stood in for the common period, when it did.
+    pub note: Option<String>,
+}
 
 /// An order spectrum: amplitude per bin, `bins_per_order` bins per order.
 struct Orders {
@@ -97,7 +111,7 @@ fn ln(v: f64) -> Option<f64> {
 }
 
 /// The largest whole number of revolutions ≤ `r` whose only prime factors are 2, 3 and 5
-/// (a fast FFT length with a power-of-two `P`).
+/// (a fast FFT length with a power-of-two `p`): the layout without a common period.
 fn smooth_revolutions(r: usize) -> usize {
     (1..=r)
         .rev()
@@ -113,9 +127,9 @@ fn smooth_revolutions(r: usize) -> usize {
         .unwrap_or(1)
 }
 
-/// The evidence features of one channel (see the [module docs](self)): `x` sampled at `fs`,
-/// `angle` the input shaft's measured angle over the same samples, `order` the channel's
-/// per-shaft TSA from that angle when computed.
+/// The evidence of one channel (see the [module docs](self)): `x` sampled at `fs`, `angle`
+/// the input shaft's measured angle over the same samples, `order` the channel's per-shaft
+/// TSA from that angle when computed.
 ///
 /// Errors: a record and an angle of different lengths, or under two revolutions.
 pub fn evidence(
@@ -124,107 +138,211 @@ pub fn evidence(
     angle: &ShaftAngle,
     parts: &Parts,
     order: Option<&OrderAnalysis>,
-) -> Result<BTreeMap<String, f64>> {
+) -> Result<Evidence> {
+    let map = LineMap::of(parts);
     let f_in = angle.summary.mean_hz;
     let p = samples_per_rev_for(fs, f_in);
-    let mut res = angular_resample(x, angle, 1.0, p)?;
-    let r = smooth_revolutions(res.revolutions);
-    res.samples.truncate(r * p);
     let max_order = NYQUIST_SHARE * 0.5 * fs / f_in;
-    let spec = Orders::new(&res.samples, p, max_order)?;
+    let mut res = angular_resample(x, angle, 1.0, p)?;
+    let mut layout = map.layout(res.revolutions);
+    if layout.periods.is_none() {
+        layout.revolutions = smooth_revolutions(res.revolutions);
+    }
+    res.samples.truncate(layout.revolutions * p);
+    let mut values = angular_features(&res.samples, p, &layout, &map, parts, max_order)?;
+    if let Some(a) = order {
+        tsa_features(a, &mut values);
+    }
+    stat_features(x, &mut values);
+    let spread = spread(
+        x,
+        fs,
+        angle,
+        &res.samples,
+        p,
+        &layout,
+        &map,
+        parts,
+        max_order,
+    )?;
+    Ok(Evidence {
+        values,
+        spread,
+        note: map.resolution_note(&layout),
+    })
+}
+
+/// Segments a record's repeatability is measured on: quarters, each a whole number of
+/// common periods when the record holds at least four; else halves.
+const SEGMENTS: usize = 4;
+
+/// `sqrt(median(χ²_{K−1} / (K − 1)))`: the median of the standard deviation of `K` normal
+/// values over their standard deviation (K = 2, 3, 4).
+fn sd_median_factor(k: usize) -> f64 {
+    match k {
+        2 => 0.6745,
+        3 => 0.8326,
+        _ => 0.8881,
+    }
+}
+
+/// Each feature's noise in the whole record, from its spread over the record's segments: the
+/// standard deviation `sd` of its values on `K` segments (each a whole number of common
+/// periods on a grid, else an equal share of the revolutions), over `√K` (a segment holds
+/// `1/K` of the record, so `K` times its variance) and over the median-unbiasing factor
+/// [`sd_median_factor`] (a baseline takes the median over its records). TSA metrics come
+/// from each segment's own averages. Empty when the record holds fewer than two segments.
+#[allow(clippy::too_many_arguments)]
+fn spread(
+    x: &[f64],
+    fs: f64,
+    angle: &ShaftAngle,
+    resampled: &[f64],
+    p: usize,
+    layout: &Layout,
+    map: &LineMap,
+    parts: &Parts,
+    max_order: f64,
+) -> Result<BTreeMap<String, f64>> {
+    let (k, seg) = match layout.periods {
+        Some(n) if n >= 2 => {
+            let k = SEGMENTS.min(n);
+            let per = layout.revolutions / n;
+            (
+                k,
+                Layout {
+                    revolutions: per * (n / k),
+                    periods: Some(n / k),
+                },
+            )
+        }
+        Some(_) => return Ok(BTreeMap::new()),
+        None if layout.revolutions >= 2 * SEGMENTS => (
+            SEGMENTS,
+            Layout {
+                revolutions: smooth_revolutions(layout.revolutions / SEGMENTS),
+                periods: None,
+            },
+        ),
+        None => return Ok(BTreeMap::new()),
+    };
+    let len = seg.revolutions * p;
+    let train = train_of(parts);
+    let mut sides = Vec::with_capacity(k);
+    for i in 0..k {
+        let part = &resampled[i * len..(i + 1) * len];
+        let mut v = angular_features(part, p, &seg, map, parts, max_order)?;
+        // The samples of the same revolutions, for the TSA and the statistics.
+        let (a, b) = sample_span(angle, i * seg.revolutions, (i + 1) * seg.revolutions);
+        if b > a + 1 {
+            let sub = sub_angle(angle, a, b);
+            if let Ok(oa) = order_analysis_at(&x[a..b], fs, &train, &sub) {
+                tsa_features(&oa, &mut v);
+            }
+            stat_features(&x[a..b], &mut v);
+        }
+        sides.push(v);
+    }
+    let norm = (k as f64).sqrt() * sd_median_factor(k);
+    Ok(sides[0]
+        .keys()
+        .filter_map(|f| {
+            let v: Vec<f64> = sides.iter().filter_map(|s| s.get(f).copied()).collect();
+            (v.len() == k).then(|| {
+                let m = v.iter().sum::<f64>() / k as f64;
+                let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (k - 1) as f64;
+                (f.clone(), var.sqrt() / norm)
+            })
+        })
+        .collect())
+}
+
+/// The shaft train of a gearbox's parts (what the TSA needs).
+fn train_of(parts: &Parts) -> ShaftTrain {
+    ShaftTrain {
+        input_shaft: parts.input_shaft.clone(),
+        mesh_order: parts.meshes.first().copied().unwrap_or(1.0),
+        shafts: parts.shafts.clone(),
+        meshes: parts.meshes.clone(),
+    }
+}
+
+/// The samples `[a, b)` over which the input shaft turns from revolution `r0` to `r1` of the
+/// angle's usable part.
+fn sample_span(angle: &ShaftAngle, r0: usize, r1: usize) -> (usize, usize) {
+    let (lo, hi) = angle.usable;
+    let start = angle.revs[lo];
+    let at = |r: usize| {
+        let target = start + r as f64;
+        lo + angle.revs[lo..=hi].partition_point(|&v| v < target)
+    };
+    (at(r0), at(r1).min(hi + 1))
+}
+
+/// The angle over samples `[a, b)`, as a track of its own.
+fn sub_angle(angle: &ShaftAngle, a: usize, b: usize) -> ShaftAngle {
+    let r0 = angle.revs[a];
+    let revs: Vec<f64> = angle.revs[a..b].iter().map(|r| r - r0).collect();
+    let span = revs.last().copied().unwrap_or(0.0);
+    let mut summary = angle.summary.clone();
+    summary.revolutions = span;
+    if b > a + 1 {
+        summary.mean_hz = span * angle.sample_rate / (b - a - 1) as f64;
+    }
+    ShaftAngle {
+        revs,
+        sample_rate: angle.sample_rate,
+        usable: (0, b - a - 1),
+        summary,
+    }
+}
+
+/// The features read from the record in the input shaft's angle: line classes, shaft lines,
+/// the envelope's classes, level and bearing lines.
+fn angular_features(
+    samples: &[f64],
+    p: usize,
+    layout: &Layout,
+    map: &LineMap,
+    parts: &Parts,
+    max_order: f64,
+) -> Result<BTreeMap<String, f64>> {
+    let spec = amplitude_spectrum(samples, p as f64, Window::Hann)?;
     let mut out = BTreeMap::new();
-    let mut put = |k: String, v: Option<f64>| {
-        if let Some(v) = v.and_then(ln) {
+    for (k, e) in map.energies(&spec.amplitude, layout, max_order, true) {
+        if let Some(v) = ln(e.sqrt()) {
             out.insert(k, v);
         }
-    };
-    mesh_features(&spec, parts, &mut put);
-    for (s, &rate) in &parts.shafts {
-        put(format!("shaft.{s}.1x"), spec.peak(rate, 0.0));
-        put(format!("shaft.{s}.2x"), spec.peak(2.0 * rate, 0.0));
     }
-    envelope_features(&res.samples, p, parts, max_order, &mut put)?;
-    if let Some(a) = order {
-        for s in &a.shafts {
-            let m = &s.metrics;
-            for (k, v) in [
-                ("fm4", m.fm4),
-                ("na4", m.na4),
-                ("m6a", m.m6a),
-                ("kurtosis", m.kurtosis),
-                ("er", m.er),
-            ] {
-                put(format!("tsa.{}.{k}", s.shaft), v);
-            }
-        }
-    }
-    let m = x.iter().sum::<f64>() / x.len() as f64;
-    let xc: Vec<f64> = x.iter().map(|v| v - m).collect();
-    put("stat.rms".into(), Some(rms(&xc)));
-    put("stat.kurtosis".into(), Some(kurtosis(&xc)));
+    envelope_features(samples, p, layout, map, parts, max_order, &mut out)?;
     Ok(out)
 }
 
-/// Is an offset `delta` (orders) a multiple of shaft `s`'s rate that **only** `s` makes? In
-/// a train whose rates are commensurate, a faster shaft's harmonics are also harmonics of a
-/// slower one (1 × the input rate is 3 × the idler's when they turn 3:1): a once-per-revolution
-/// impact on the slower shaft raises lines at every multiple of its rate, an impact on the
-/// faster one only at its own multiples. So a line counts for `s` when it is not (within 1.5
-/// bins) a multiple of any faster shaft's rate; the fastest shaft keeps all its multiples.
-fn specific_to(parts: &Parts, s: &str, delta: f64, bin: f64) -> bool {
-    let rs = parts.shafts[s];
-    parts
-        .shafts
-        .iter()
-        .filter(|(t, rt)| t.as_str() != s && **rt > rs * (1.0 + 1e-9))
-        .all(|(_, &rt)| {
-            let m = (delta / rt).round();
-            m < 1.0 || (delta - m * rt).abs() > 1.5 * bin
-        })
-}
-
-/// The first `n` multiples of shaft `s`'s rate that are [`specific_to`] it and, when read
-/// around `centre` (a mesh harmonic) as sidebands, do not land on a mesh harmonic.
-fn specific_offsets(parts: &Parts, s: &str, centre: f64, bin: f64, n: usize) -> Vec<f64> {
-    let rs = parts.shafts[s];
-    let on_mesh = |o: f64| {
-        centre > 0.0
-            && parts.meshes.iter().any(|&om| {
-                (1..=MESH_HARMONICS + 1).any(|k| {
-                    let h = k as f64 * om;
-                    (h - (centre + o)).abs() < 1.5 * bin || (h - (centre - o)).abs() < 1.5 * bin
-                })
-            })
-    };
-    (1..=4 * n)
-        .map(|j| j as f64 * rs)
-        .filter(|&d| specific_to(parts, s, d, bin) && !on_mesh(d))
-        .take(n)
-        .collect()
-}
-
-/// `mesh<i>.h<k>` and `mesh<i>.h<k>.sb.<s>` for every stage and every shaft carrying one of
-/// its gears.
-fn mesh_features(spec: &Orders, parts: &Parts, put: &mut impl FnMut(String, Option<f64>)) {
-    for (i, &om) in parts.meshes.iter().enumerate() {
-        let stage = i + 1;
-        let mut shafts: Vec<&str> = parts
-            .gears
-            .iter()
-            .filter(|g| g.stage == stage)
-            .map(|g| g.shaft.as_str())
-            .collect();
-        shafts.dedup();
-        for k in 1..=MESH_HARMONICS {
-            let c = k as f64 * om;
-            put(format!("mesh{stage}.h{k}"), spec.peak(c, 0.0));
-            for s in &shafts {
-                let orders: Vec<f64> = specific_offsets(parts, s, c, spec.bin(), SIDEBANDS)
-                    .into_iter()
-                    .flat_map(|d| [c - d, c + d])
-                    .collect();
-                put(format!("mesh{stage}.h{k}.sb.{s}"), spec.rms_of(orders, 0.0));
+/// `tsa.<S>.<metric>` from a per-shaft TSA.
+fn tsa_features(a: &OrderAnalysis, out: &mut BTreeMap<String, f64>) {
+    for s in &a.shafts {
+        let m = &s.metrics;
+        for (k, v) in [
+            ("fm4", m.fm4),
+            ("na4", m.na4),
+            ("m6a", m.m6a),
+            ("kurtosis", m.kurtosis),
+            ("er", m.er),
+        ] {
+            if let Some(v) = v.and_then(ln) {
+                out.insert(format!("tsa.{}.{k}", s.shaft), v);
             }
+        }
+    }
+}
+
+/// `stat.rms` and `stat.kurtosis` of the raw record.
+fn stat_features(x: &[f64], out: &mut BTreeMap<String, f64>) {
+    let m = x.iter().sum::<f64>() / x.len() as f64;
+    let xc: Vec<f64> = x.iter().map(|v| v - m).collect();
+    for (k, v) in [("stat.rms", rms(&xc)), ("stat.kurtosis", kurtosis(&xc))] {
+        if let Some(v) = ln(v) {
+            out.insert(k.into(), v);
         }
     }
 }
@@ -249,27 +367,37 @@ fn envelope(x: &[f64], p: usize, lo: f64, hi: f64) -> Vec<f64> {
     buf.iter().map(|c| c.norm() * inv_n).collect()
 }
 
-/// `env.level`, `env.<s>` and `bearing.<b>.<defect>` from the envelope spectrum.
+/// `env.level`, `env.own.<S>`, `env.shared`, `env.none` and `bearing.<b>.<defect>` from the
+/// envelope spectrum.
 fn envelope_features(
     x: &[f64],
     p: usize,
+    layout: &Layout,
+    map: &LineMap,
     parts: &Parts,
     max_order: f64,
-    put: &mut impl FnMut(String, Option<f64>),
+    out: &mut BTreeMap<String, f64>,
 ) -> Result<()> {
-    let top_mesh = parts.meshes.iter().fold(0.0f64, |a, &b| a.max(b));
-    let lo = 3.5 * top_mesh;
+    let top_mesh = map.meshes.iter().fold(0.0f64, |a, &b| a.max(b));
+    let lo = (super::lines::MESH_REGION_ORDERS + 0.5) * top_mesh;
     if !(lo < 0.5 * max_order) {
         return Ok(());
     }
     let mut env = envelope(x, p, lo, max_order);
-    put("env.level".into(), Some(rms(&env)));
+    if let Some(v) = ln(rms(&env)) {
+        out.insert("env.level".into(), v);
+    }
     let m = env.iter().sum::<f64>() / env.len() as f64;
     env.iter_mut().for_each(|v| *v -= m);
     let spec = Orders::new(&env, p, max_order)?;
-    for s in parts.shafts.keys() {
-        let orders = specific_offsets(parts, s, 0.0, spec.bin(), 3);
-        put(format!("env.{s}"), spec.rms_of(orders, 0.0));
+    for (k, e) in map.energies(&spec.spectrum.amplitude, layout, max_order, false) {
+        if let Some(class) = k
+            .strip_prefix("lines.")
+            .and_then(|k| k.strip_suffix(".low"))
+            && let Some(v) = ln(e.sqrt())
+        {
+            out.insert(format!("env.{class}"), v);
+        }
     }
     let lines = bearing_lines(parts);
     for (i, (bearing, name, shaft, orders)) in lines.iter().enumerate() {
@@ -289,33 +417,26 @@ fn envelope_features(
                 })
             })
             .collect();
-        put(
-            format!("bearing.{bearing}.{name}"),
-            spec.rms_of(own, BEARING_SLIP),
-        );
+        if let Some(v) = spec.rms_of(own, BEARING_SLIP).and_then(ln) {
+            out.insert(format!("bearing.{bearing}.{name}"), v);
+        }
     }
     Ok(())
 }
-
-/// Relative tolerance of a bearing line (its rolling elements slip).
-const BEARING_SLIP: f64 = 0.01;
 
 /// A bearing's defect lines: bearing, defect, shaft, orders of harmonics 1..3.
 type BearingLine = (String, &'static str, String, Vec<f64>);
 
 /// Every described bearing's defect lines in input-shaft orders; the ball line is read at
-/// 2 × BSF (a ball defect strikes both races once per spin).
+/// 2 × BSF (a ball defect strikes both races once per spin). The cage's own frequency (FTF,
+/// ≈ 0.4 × the shaft rate) is not read: it sits among the shafts' first lines, within the
+/// rolling elements' slip of them, and a cage defect shows as a modulation of the other lines.
 fn bearing_lines(parts: &Parts) -> Vec<BearingLine> {
     let mut v = Vec::new();
     for b in &parts.bearings {
         let rs = parts.shafts.get(&b.shaft).copied().unwrap_or(0.0);
         let o = &b.orders;
-        for (name, d) in [
-            ("bpfo", o.bpfo),
-            ("bpfi", o.bpfi),
-            ("bsf", 2.0 * o.bsf),
-            ("ftf", o.ftf),
-        ] {
+        for (name, d) in [("bpfo", o.bpfo), ("bpfi", o.bpfi), ("bsf", 2.0 * o.bsf)] {
             let orders = (1..=3).map(|h| h as f64 * d * rs).collect();
             v.push((b.name.clone(), name, b.shaft.clone(), orders));
         }
@@ -342,16 +463,8 @@ mod tests {
         .unwrap()
     }
 
-    /// Mesh 2 (8 × the input rate) amplitude-modulated at the idler's rate (1/3 order) reads as
-    /// idler sidebands around mesh 2 — not around mesh 1, not at the input's rate; the mesh
-    /// amplitudes are read exactly (Hann, on-bin).
-    #[test]
-    fn sidebands_name_the_modulating_shaft() {
-        let gb = helical();
-        let parts = Parts::of(&gb);
-        let (fs, f) = (8192.0, 32.0);
-        let n = 8192 * 6;
-        let tach: Vec<f64> = (0..n)
+    fn tach(n: usize, fs: f64, f: f64) -> ShaftAngle {
+        let t: Vec<f64> = (0..n)
             .map(|i| {
                 if (i as f64 / fs * f * 4.0).fract() < 0.3 {
                     1.0
@@ -360,7 +473,18 @@ mod tests {
                 }
             })
             .collect();
-        let angle = track_tachometer(&tach, fs, 4).unwrap();
+        track_tachometer(&t, fs, 4).unwrap()
+    }
+
+    /// Mesh 2 (8 × the input rate) amplitude-modulated at the idler's rate (1/3 order) puts
+    /// its sidebands in the idler's own lines near mesh 2 — none in the output's, none in the
+    /// `none` class beyond the window's leakage; the carriers read as mesh lines.
+    #[test]
+    fn sidebands_land_in_the_modulating_shafts_own_lines() {
+        let parts = Parts::of(&helical());
+        let (fs, f) = (8192.0, 32.0);
+        let n = 8192 * 8; // 256 revolutions: 17 common periods of 15
+        let angle = tach(n, fs, f);
         let x: Vec<f64> = (0..n)
             .map(|i| {
                 let th = TAU * f * i as f64 / fs;
@@ -368,15 +492,22 @@ mod tests {
             })
             .collect();
         let e = evidence(&x, fs, &angle, &parts, None).unwrap();
-        let v = |k: &str| e[k].exp();
-        assert!((v("mesh2.h1") - 1.0).abs() < 0.02, "{e:?}");
-        assert!((v("mesh1.h1") - 0.5).abs() < 0.02, "{e:?}");
-        // j = 1 sidebands of 0.15 each; j = 2 and 4 empty; j = 3 left out (3 × 1/3 is the
-        // input shaft's 1×, not the idler's alone): RMS over 6 lines = 0.15/√3.
-        let sb = v("mesh2.h1.sb.idler");
-        assert!((sb - 0.15 / 3f64.sqrt()).abs() < 0.005, "{sb} {e:?}");
-        assert!(v("mesh2.h1.sb.out") < 0.01 * sb, "{e:?}");
-        assert!(v("mesh1.h1.sb.in") < 0.01 * sb, "{e:?}");
+        let v = |k: &str| e.values.get(k).map_or(0.0, |v| v.exp());
+        // Each sideband 0.15 over its three bins (1 + 2 × 0.25 of the energy): 2 × 1.5 × 0.0225.
+        let sb = v("lines.own.idler.near.m8");
+        assert!((sb - (2.0 * 1.5 * 0.0225f64).sqrt()).abs() < 0.01, "{e:?}");
+        assert!(v("lines.own.out.near.m8") < 0.01 * sb, "{e:?}");
+        assert!(v("lines.own.idler.far.m8") < 0.01 * sb, "{e:?}");
+        // The carrier of mesh 2 (1) and mesh 1 (0.5) over three bins each.
+        assert!((v("lines.mesh.m8") - 1.5f64.sqrt()).abs() < 0.02, "{e:?}");
+        assert!(
+            (v("lines.mesh.m16") - (0.25 * 1.5f64).sqrt()).abs() < 0.02,
+            "{e:?}"
+        );
+        assert!(e.note.is_none());
+        // The quarters of a stationary record agree.
+        let d = e.spread["lines.own.idler.near.m8"];
+        assert!(d.abs() < 0.01, "{d}");
     }
 
     #[test]

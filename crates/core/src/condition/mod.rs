@@ -3,20 +3,28 @@
 //!
 //! 1. [`state`]: the input shaft's rate is measured (tachometer, else tacho-less around a
 //!    hint) and the load is taken as given.
-//! 2. [`evidence`]: speed-free features per mesh, shaft and bearing from the record resampled
-//!    to the input shaft's angle ([`parts`] says where each part shows).
-//! 3. [`baseline`]: healthy records with their states; a record is compared with what they
-//!    expect at its state, the scale and threshold calibrated by leave-one-out over states.
-//! 4. [`findings`]: which part the departure points at, with the evidence in words.
+//! 2. [`lines`]: the parts map — which shafts can make a line at each order of a common period
+//!    of the shafts — and the line classes it sorts a record's order spectrum into.
+//! 3. [`evidence`]: speed-free features per line class, region, shaft and bearing from the
+//!    record resampled to the input shaft's angle, and their spread over its segments.
+//! 4. [`baseline`] and [`calibration`]: healthy records with their states; a record is compared
+//!    with what they expect at its state, scaled by the repeatability of a state.
+//! 5. [`explain`], [`candidates`] and [`findings`]: which part's predicted change explains the
+//!    record's change, and how much of it.
 
 pub mod baseline;
+pub mod calibration;
+pub mod candidates;
 pub mod evidence;
+pub mod explain;
 pub mod findings;
+pub mod lines;
 pub mod parts;
 pub mod state;
+pub mod synchronous;
 
 pub use baseline::{Coverage, StateBaseline, StateRecord, StateScore};
-pub use evidence::evidence;
+pub use evidence::{EVIDENCE_VERSION, Evidence, evidence};
 pub use findings::{Finding, findings};
 pub use parts::Parts;
 pub use state::{Load, OperatingState, SpeedSource, Tacho, measure};

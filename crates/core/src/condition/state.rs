@@ -2,10 +2,11 @@
 //!
 //! The rate is never taken on trust. With a tachometer it is counted from the pulses
 //! ([`track_tachometer`]). Without one it is found in two steps: first the rate within
-//! [`TACHO_LESS_SEARCH`] of the nominal hint at which the gearbox's whole comb of mesh lines
-//! (every stage's mesh order × 1..3) is strongest ([`comb_rate`]: induction motors slip a few
-//! per cent below their setting, so the hint only says where to look, and one line alone is
-//! easily confused with a sideband in a dense spectrum); then the input shaft's angle is
+//! [`TACHO_LESS_SEARCH`] of the nominal hint at which the lines of every shaft line up
+//! ([`super::synchronous::synchronous_rate`]; induction motors slip a few per cent below their
+//! setting, so the hint only says where to look, and one line alone is easily confused with a
+//! sideband in a dense spectrum; [`comb_rate`], the mesh lines alone, when the shafts' rates
+//! are not commensurate); then the input shaft's angle is
 //! tracked from the phase of the strongest stage-1 mesh harmonic within
 //! [`TRACK_SEARCH`] of that rate ([`track_mesh_phase`]), or, when no line can be followed,
 //! held at that rate ([`constant_rate_angle`]).
@@ -25,8 +26,11 @@ pub const TACHO_LESS_SEARCH: f64 = 0.06;
 /// Most tachometer pulses per input-shaft revolution accepted (an encoder's line count).
 pub const MAX_PULSES_PER_REV: usize = 10_000;
 
-/// Relative half-width of the phase tracker's search around the comb's rate.
-pub const TRACK_SEARCH: f64 = 0.005;
+/// Relative half-width of the phase tracker's search around the lines' rate.
+pub const TRACK_SEARCH: f64 = 0.0005;
+/// Largest relative difference between the phase tracker's mean rate and the rate every
+/// shaft's lines agree on for the track to be used.
+pub const TRACK_AGREEMENT: f64 = 2e-4;
 
 /// The input-shaft rate (Hz) within `hint · (1 ± TACHO_LESS_SEARCH)` that maximises the sum of
 /// the log amplitudes of the gearbox's mesh lines (orders `k · O_i`, k = 1..3, every stage
@@ -152,6 +156,35 @@ pub struct Tacho<'a> {
     pub pulses_per_rev: usize,
 }
 
+/// The input shaft's angle without a tachometer: the rate within [`TACHO_LESS_SEARCH`] of
+/// `hint` at which every shaft's lines line up, then the phase of a stage-1 mesh line followed
+/// within [`TRACK_SEARCH`] of it (low-passed below the slowest shaft's sideband spacing); a line
+/// too weak to follow, or a track whose mean rate leaves that rate by more than
+/// [`TRACK_AGREEMENT`], gives that rate held constant.
+fn tacho_less(x: &[f64], fs: f64, gearbox: &Gearbox, hint: f64) -> Result<ShaftAngle> {
+    let z = gearbox.f1_per_input_hz;
+    let parts = super::parts::Parts::of(gearbox);
+    let map = super::lines::LineMap::of(&parts);
+    let rate = match super::synchronous::synchronous_rate(x, fs, &map, hint, TACHO_LESS_SEARCH) {
+        Ok(r) => r,
+        Err(_) => comb_rate(x, fs, gearbox, hint)?,
+    };
+    let slowest = parts
+        .shafts
+        .values()
+        .filter(|r| **r > 0.0)
+        .fold(1.0f64, |a, &b| a.min(b));
+    let opts = MeshTrackOptions {
+        search: TRACK_SEARCH,
+        lowpass_orders: 0.4 * slowest,
+        ..Default::default()
+    };
+    Ok(track_mesh_phase(x, fs, z * rate, z, &opts)
+        .ok()
+        .filter(|a| (a.summary.mean_hz / rate - 1.0).abs() <= TRACK_AGREEMENT)
+        .unwrap_or_else(|| constant_rate_angle(x.len(), fs, rate)))
+}
+
 /// Measure the input shaft's angle and the record's state: from `tacho` when given, else
 /// tacho-less on `x` around `hint_hz` (the stage-1 mesh order of `gearbox`).
 ///
@@ -180,16 +213,7 @@ pub fn measure(
                         .into(),
                 )
             })?;
-            let z = gearbox.f1_per_input_hz;
-            let rate = comb_rate(x, fs, gearbox, h)?;
-            let opts = MeshTrackOptions {
-                search: TRACK_SEARCH,
-                ..Default::default()
-            };
-            // A line too weak to follow: the comb's rate, held constant.
-            let angle = track_mesh_phase(x, fs, z * rate, z, &opts)
-                .unwrap_or_else(|_| constant_rate_angle(x.len(), fs, rate));
-            (angle, SpeedSource::TachoLess)
+            (tacho_less(x, fs, gearbox, h)?, SpeedSource::TachoLess)
         }
     };
     let state = OperatingState {
@@ -245,8 +269,17 @@ mod tests {
                 }
             })
             .collect();
+        // The 16th order and a little noise (a record without any is no real record: the
+        // tacho-less search reads lines against the background around them).
+        let mut s = 11u64;
         let x: Vec<f64> = (0..n)
-            .map(|i| (std::f64::consts::TAU * 16.0 * f * t(i)).sin())
+            .map(|i| {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                let noise = ((s >> 11) as f64 / (1u64 << 53) as f64) - 0.5;
+                (std::f64::consts::TAU * 16.0 * f * t(i)).sin() + 0.01 * noise
+            })
             .collect();
         let tacho = Tacho {
             samples: &tach,

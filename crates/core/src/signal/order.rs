@@ -130,6 +130,10 @@ pub struct MeshTrackOptions {
     /// The strongest of the mesh harmonics `1 ..= harmonics` (under Nyquist) is tracked: on a
     /// real housing the fundamental is often not the strongest mesh line.
     pub harmonics: usize,
+    /// Half-width of the demodulated low-pass, in orders of the tracked shaft: below the
+    /// slowest sideband spacing of the train (a shaft turning at 0.2 × the tracked one puts
+    /// sidebands 0.2 orders from the mesh line), so that no sideband pulls the phase.
+    pub lowpass_orders: f64,
 }
 
 impl Default for MeshTrackOptions {
@@ -138,6 +142,7 @@ impl Default for MeshTrackOptions {
             search: 0.08,
             degree: 3,
             harmonics: 3,
+            lowpass_orders: LOWPASS_ORDERS,
         }
     }
 }
@@ -282,7 +287,8 @@ pub fn track_mesh_phase_with(
     let coef = coarse_mesh_frequency(&xc, fs, fm0, shaft_a, opts);
 
     // Pass 2: demodulate, low-pass, unwrap.
-    let (phi_a, psi, step) = demodulated_phase(&xc, fs, &coef, fm0, shaft_a)?;
+    let lowpass = opts.lowpass_orders.clamp(1e-3, LOWPASS_ORDERS);
+    let (phi_a, psi, step) = demodulated_phase(&xc, fs, &coef, fm0, shaft_a, lowpass)?;
     let mut revs: Vec<f64> = (0..n)
         .map(|i| (phi_a[i] + cubic_at(&psi, i as f64 / step)) / mesh_order)
         .collect();
@@ -296,7 +302,8 @@ pub fn track_mesh_phase_with(
              (speed too irregular or line too weak to track)"
         )));
     }
-    let edge = (EDGE_REVS * fs / shaft_a).round() as usize;
+    // The low-pass's transient lasts about 1 / (lowpass · f_shaft).
+    let edge = (EDGE_REVS.max(1.2 / lowpass) * fs / shaft_a).round() as usize;
     let usable = (edge.min(n / 4), (n - 1).saturating_sub(edge).max(3 * n / 4));
     let (mean_hz, var, sd, span) = speed_stats(&revs, fs, usable.0, usable.1);
     let mesh_hz = mean_hz * fund_order;
@@ -476,7 +483,7 @@ fn coarse_phase(coef: &[f64], half: f64, tau: f64) -> f64 {
 }
 
 /// Pass 2: `xc` (the mean-free record) demodulated by the coarse phase, low-passed to
-/// `±LOWPASS_ORDERS` orders of `shaft_a` and unwrapped. Returns the coarse phase used at every
+/// `±lowpass` orders of `shaft_a` and unwrapped. Returns the coarse phase used at every
 /// sample (`φ_A`, cycles), the unwrapped residual phase `ψ / 2π` (cycles) on a decimated grid,
 /// and that grid's step in samples.
 ///
@@ -489,13 +496,14 @@ fn demodulated_phase(
     coef: &[f64],
     fm0: f64,
     shaft_a: f64,
+    lowpass: f64,
 ) -> Result<(Vec<f64>, Vec<f64>, f64)> {
     let n = xc.len();
     let half = 0.5 * n as f64 / fs;
     let m = fast_len(n);
     let (mut buf, phi_a) = demodulate(xc, fs, coef, half, m);
     PlanCache::global().complex(m, false).process(&mut buf);
-    let bw = ((LOWPASS_ORDERS * shaft_a) * m as f64 / fs).floor() as usize;
+    let bw = ((lowpass * shaft_a) * m as f64 / fs).floor() as usize;
     for (k, c) in buf.iter_mut().enumerate() {
         if k > bw && k < m - bw {
             *c = Complex64::new(0.0, 0.0);
