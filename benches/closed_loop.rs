@@ -46,8 +46,8 @@
 //!
 //! That one-draw measure is a coin toss for a small effect wherever the model is chaotic: any
 //! change of the model, however small, sends the trajectory elsewhere, so "the same record
-//! without the effect" is in effect another draw, and `v_effect ≈ v_noise` either way. Session 12
-//! measured this (`CL_EFFECT_SCALE`, below) and added the **K-draw measure**, now the primary
+//! without the effect" is in effect another draw, and `v_effect ≈ v_noise` either way
+//! (`CL_EFFECT_SCALE`, below, measures it); hence the **K-draw measure**, the primary
 //! one (`visible_k`): K = `CL_VIS_DRAWS` (default 4) records with the effect (the record itself
 //! and K − 1 other seeds) and K without it (K other seeds), log spectra on the same grid; with
 //! `D = std(mean_with − mean_without)` and `s²` the per-point variance between draws, pooled
@@ -65,7 +65,7 @@
 //! kind under both measures.
 //!
 //! An unexplained feature is a line of the residual (`unexplained`) or a feature of the
-//! record's level over time (`unexplained_in_time`: bursts, impacts, level drift; session 13);
+//! record's level over time (`unexplained_in_time`: bursts, impacts, level drift);
 //! rows carry the count of both and `in_time`, the latter's kinds. `CL_LEVEL_ONLY=1` draws the
 //! records and prints one `LEVEL` line each (the level trace's scatter, burst threshold,
 //! highest window, runs, drift and its standard error, the time features) and nothing else:

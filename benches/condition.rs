@@ -22,8 +22,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use gearwear::assessment::{
-    GearboxRef, Machine, RecordFacts, TableDiagnoser, TachoChannel, Thresholds, assess,
-    baseline_features, fit_baselines,
+    Baselines, GearboxRef, Machine, RecordFacts, TableDiagnoser, TachoChannel, Thresholds, assess,
+    baseline_features,
 };
 use gearwear::condition::Load;
 use gearwear::diagnosis::DiagnoseOptions;
@@ -90,7 +90,7 @@ fn main() {
             id: "phm09-helical".into(),
             name: gb.name().into(),
             hash: gb.hash.clone(),
-            table_status: "ready".into(),
+            table_status: gearwear::signature::TableStatus::Ready,
             table_progress: 1.0,
         },
         described: true,
@@ -116,15 +116,15 @@ fn main() {
             }
         }
     }
-    let (pooled, states, counts) = fit_baselines(&by_channel).unwrap();
+    let fitted = Baselines::fit(&by_channel).require_all().unwrap();
     eprintln!(
         "baseline: 10 records' features and fit in {:.2} s (once)",
         t0.elapsed().as_secs_f64()
     );
     let judged = Machine {
-        baselines: &pooled,
-        state_baselines: &states,
-        baseline_counts: &counts,
+        baselines: &fitted.pooled,
+        state_baselines: &fitted.states,
+        baseline_counts: &fitted.counts,
         ..machine
     };
     // The 4 s record: run 1 then run 2 of the healthy 40 Hz high-load state.

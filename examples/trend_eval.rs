@@ -1,6 +1,5 @@
 //! How well the trend finds the time to alarm on simulated degradations, and how often it
-//! calls a flat history a trend (issue 33 targets; protocol and measured figures in
-//! `docs/trends.md`).
+//! calls a flat history a trend.
 //!
 //! `cargo run --release --example trend_eval`. Env: `TREND_EVAL_RUNS` runs of each kind
 //! (default 40), `TREND_EVAL_SEED` the seed base (default 2026: the evaluation seeds; develop

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The closed loop (issue 15, part 4) on the real SpectraQuest records with their own gearbox
+# The closed loop on the real SpectraQuest records with their own gearbox
 # description: a table for the description, then `gearwear calibrate` on every healthy and
 # broken-tooth record, one line each: f1, effects claimed, error before → after, wear before →
 # after, the two tooth-damage candidates (ΔBIC, their shaft's TSA FM4, eligible), the level-

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Several `gearwear serve` replicas on one PostgreSQL behind nginx, without containers: the
-# topology of docker/compose.yaml on this machine's loopback (issue 16).
+# topology of docker/compose.yaml on this machine's loopback.
 #
 #   scripts/cluster.sh [--replicas 2] [--port 0] [--keep-db] [--database NAME] [--dir DIR]
 #                      [--seconds 43200] [--max-restarts 20] [--env-file FILE] [--no-build]

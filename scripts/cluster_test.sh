@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Tests of the replicated topology (issue 16), each on a cluster started by scripts/cluster.sh
+# Tests of the replicated topology, each on a cluster started by scripts/cluster.sh
 # (fresh PostgreSQL database, replicas, nginx) and stopped after it:
 #
 #   1 race      the same Idempotency-Key POSTed at once to two replicas (their own ports,

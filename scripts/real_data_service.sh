@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The issue-14 "new user" flow on the real SpectraQuest records, through the HTTP service:
+# The "new user" flow on the real SpectraQuest records, through the HTTP service:
 # add the gearbox description, wait for its table, point a machine at it, post healthy
 # records as its baseline, then post the others and print what each one gets.
 #

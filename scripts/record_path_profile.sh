@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
-# Instructions per record on the server's record path (issue 16), a figure the machine's load
+# Instructions per record on the server's record path, a figure the machine's load
 # does not move: `gearwear serve` (release) under `valgrind --tool=callgrind` on a fresh SQLite
 # file, collection switched on after WARMUP records, then N records posted one at a time by
 # `examples/loadgen --requests`, then the counts dumped. Prints, per record: all user-space
 # instructions of the server (every thread), the inclusive count of the diagnosis
-# (`diagnose_with_spectrum`, what `gearwear diagnose` runs), their ratio, and the largest
+# (`diagnose_with_spectrum`, what `gearwear diagnose` runs, or `diagnose_inner`, its body, where
+# it is inlined), their ratio, and the largest
 # inclusive entries outside the diagnosis. Kernel work (loopback TCP, fsync) is not counted:
 # `scripts/service_bench.sh` gives the CPU time with it.
 #
@@ -85,7 +86,9 @@ for line in open(ann):
         total = v
     else:
         rows.append((v, name))
-diag = max((v for v, f in rows if "diagnose_with_spectrum" in f), default=0)
+# The diagnosis: `diagnose_with_spectrum`, or its body when the compiler inlined it.
+diag = max((v for v, f in rows
+            if "diagnose_with_spectrum" in f or "diagnosis::diagnose_inner" in f), default=0)
 print(f"{label} {fmt}: {ok}/{n} records; per record: server {total / ok / 1e6:.2f} M instructions, "
       f"diagnosis {diag / ok / 1e6:.2f} M, ratio {total / diag:.3f}")
 seen = set()

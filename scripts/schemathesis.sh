@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# API fuzzing from the contract (issue 7, item 1): schemathesis against `openapi.yaml` and the
+# API fuzzing from the contract: schemathesis against `openapi.yaml` and the
 # real release binary, every operation, in three runs:
 #   admin  — a key with every scope: all checks (5xx, status codes, content types, headers and
 #            bodies against the spec, negative data rejected, positive data accepted);

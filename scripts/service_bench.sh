@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Service throughput on loopback (issue 5's performance figures): one `gearwear serve` on a
+# Service throughput on loopback: one `gearwear serve` on a
 # fresh SQLite file, then `examples/loadgen` closed loop, 4 clients, 15 s per case, for two
 # records × two body formats:
 #   model — a 1 s, 25.6 kHz record of the model itself (`gearwear synth --ea 0.5`): the

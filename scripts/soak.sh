@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Load and soak run of `gearwear serve` (issue 7, item 3).
+# Load and soak run of `gearwear serve`.
 #
 #   scripts/soak.sh [--store sqlite|postgres] [--seconds 600] [--fraction 0.8] [--rate R]
 #                   [--capacity-seconds 20] [--format json|f32]

@@ -16,8 +16,8 @@
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
 pub use gearwear_core::{
-    Error, Result, analysis, assessment, closed_loop, condition, diagnosis, error, gearbox, model,
-    novelty, record, signal, signature, solver, trend, units,
+    Error, Result, analysis, assessment, closed_loop, condition, diagnosis, error, gearbox,
+    machine, model, novelty, record, signal, signature, solver, trend, units,
 };
 pub use gearwear_plot as plot;
 pub use gearwear_store::{self as store, time};

@@ -14,8 +14,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use gearwear::assessment::{
-    Assessment, GearboxRef, Machine, RecordFacts, TableDiagnoser, TachoChannel, Thresholds, assess,
-    baseline_features, fit_baselines,
+    Assessment, Baselines, GearboxRef, Machine, RecordFacts, TableDiagnoser, TachoChannel,
+    Thresholds, assess, baseline_features,
 };
 use gearwear::condition::Load;
 use gearwear::diagnosis::DiagnoseOptions;
@@ -163,7 +163,7 @@ fn machine<'a>(
     t: &Train,
     gb: &'a Gearbox,
     diagnoser: Option<&'a TableDiagnoser>,
-    baselines: &'a gearwear::assessment::Baselines,
+    baselines: &'a Baselines,
 ) -> Machine<'a> {
     Machine {
         gearbox: gb,
@@ -171,16 +171,16 @@ fn machine<'a>(
             id: format!("phm09-{}", t.name),
             name: gb.name().into(),
             hash: gb.hash.clone(),
-            table_status: "ready".into(),
+            table_status: gearwear::signature::TableStatus::Ready,
             table_progress: 1.0,
         },
         described: true,
         diagnoser,
         table_note: None,
         input_shaft_hz: None,
-        baselines: &baselines.0,
-        state_baselines: &baselines.1,
-        baseline_counts: &baselines.2,
+        baselines: &baselines.pooled,
+        state_baselines: &baselines.states,
+        baseline_counts: &baselines.counts,
         calibration: None,
         thresholds: Thresholds::default(),
         units: Default::default(),
@@ -360,13 +360,14 @@ const TALLY_HEAD: &str = "| rows | false alarms (case 1 run 2) | damaged gear fl
 
 /// With `PHM_DEBUG_RECORD=<file stem>`: every departure of that record's channels beyond
 /// |z| = 2 and its findings, on standard error.
-fn debug_record(t: &Train, f: &File, a: &Assessment, baselines: &gearwear::assessment::Baselines) {
+fn debug_record(t: &Train, f: &File, a: &Assessment, baselines: &Baselines) {
     let stem = format!("{}{}_{}hz_{}_{}", t.prefix, f.case, f.speed, f.load, f.run);
     if std::env::var("PHM_DEBUG_RECORD").ok().as_deref() != Some(stem.as_str()) {
         return;
     }
     for c in &a.assessed {
-        let (Some(b), Some(state)) = (baselines.1.get(&c.name), c.features.state.as_ref()) else {
+        let (Some(b), Some(state)) = (baselines.states.get(&c.name), c.features.state.as_ref())
+        else {
             continue;
         };
         let Ok(s) = b.score(state, &c.features.evidence) else {
@@ -397,7 +398,7 @@ fn fit_baseline(
     gb: &Gearbox,
     diagnoser: Option<&TableDiagnoser>,
     tacho: bool,
-) -> (gearwear::assessment::Baselines, f64) {
+) -> (Baselines, f64) {
     let base_files: Vec<&File> = all.iter().filter(|f| f.case == 1 && f.run == 1).collect();
     let empty = Default::default();
     let m0 = machine(t, gb, diagnoser, &empty);
@@ -415,7 +416,7 @@ fn fit_baseline(
             by_channel.entry(name.to_string()).or_default().push(f);
         }
     }
-    let b = fit_baselines(&by_channel).expect("baseline");
+    let b = Baselines::fit(&by_channel).require_all().expect("baseline");
     (b, t0.elapsed().as_secs_f64())
 }
 
@@ -447,7 +448,7 @@ fn run_mode(
         })
         .collect();
     println!("### {} train, {mode}\n", t.name);
-    for (ch, b) in &baselines.1 {
+    for (ch, b) in &baselines.states {
         println!("baseline `{ch}`: threshold at a state {:.2}", b.threshold());
         if std::env::var("PHM_DEBUG").is_ok() {
             let mut sc: Vec<f64> = b.loo_scores().to_vec();

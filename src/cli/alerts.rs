@@ -1,5 +1,5 @@
 //! `gearwear alerts list|ack`: the service's alert episodes in its database (like
-//! `GET /v1/alerts` and `POST /v1/alerts/{id}/acknowledge`; docs/service.md#alerts-issue-33).
+//! `GET /v1/alerts` and `POST /v1/alerts/{id}/acknowledge`; docs/service.md#alerts).
 
 use anyhow::{Result, bail};
 use clap::{Args, Subcommand, ValueEnum};

@@ -8,9 +8,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 
-use crate::assessment::{Machine, RecordFacts, TachoChannel, baseline_features, fit_baselines};
-use crate::condition::{Load, StateBaseline};
-use crate::novelty::{MachineBaseline, RecordFeatures};
+use crate::assessment::{Baselines, Machine, RecordFacts, TachoChannel, baseline_features};
+use crate::condition::Load;
+use crate::novelty::RecordFeatures;
 
 /// One healthy record and what is known of its state.
 #[derive(Debug, Clone, PartialEq)]
@@ -96,18 +96,14 @@ pub struct Loaded {
 }
 
 /// The machine's baselines from healthy records: `read` loads a file; `facts` gives a file's
-/// facts. Returns (pooled, state-aware, records) by channel.
-#[allow(clippy::type_complexity)]
+/// facts. Fitted by the core's one fitter, as the service fits a machine's; every channel must
+/// get its baseline (the records were given to be one).
 pub fn fit(
     files: &[BaselineFile],
     machine: &Machine,
     read: &dyn Fn(&Path) -> Result<Loaded>,
     facts: &dyn Fn(&BaselineFile, &Loaded) -> RecordFacts,
-) -> Result<(
-    BTreeMap<String, MachineBaseline>,
-    BTreeMap<String, StateBaseline>,
-    BTreeMap<String, usize>,
-)> {
+) -> Result<Baselines> {
     let mut by_channel: BTreeMap<String, Vec<RecordFeatures>> = BTreeMap::new();
     for f in files {
         let mut rec =
@@ -124,7 +120,7 @@ pub fn fit(
             by_channel.entry(n).or_default().push(ft);
         }
     }
-    fit_baselines(&by_channel).with_context(|| {
+    Baselines::fit(&by_channel).require_all().with_context(|| {
         format!(
             "{} baseline record(s) given; give at least {} healthy records of the machine",
             files.len(),

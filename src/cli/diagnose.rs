@@ -14,18 +14,18 @@ use super::common::{
 use super::units::UnitArgs;
 use crate::analysis::bifurcation::grid;
 use crate::assessment::{
-    GearboxRef, Machine, MachineCalibration, RecordFacts, TableDiagnoser, TachoChannel, Thresholds,
-    assess,
+    Baselines, GearboxRef, Machine, MachineCalibration, RecordFacts, TableDiagnoser, TachoChannel,
+    Thresholds, assess,
 };
 use crate::condition::Load;
 use crate::diagnosis::DiagnoseOptions;
 use crate::record::{Column, Format, ReadOptions, read_record, read_record_channels_with_pulses};
 use crate::signal::lines::SEGMENT_PERIODS;
-use crate::signature::SensorQuantity;
 use crate::signature::precompute::{
     PrecomputeSpec, default_grid, paper_grid, partial_path, precompute,
 };
 use crate::signature::table::SimulationSettings;
+use crate::signature::{SensorQuantity, TableStatus};
 
 /// Sensor quantity on the command line.
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -314,8 +314,8 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
     };
     // Baseline first: a wrong baseline file should fail before the diagnosis runs.
     let files = baseline_files(&a, &load)?;
-    let (pooled, states, counts) = if files.is_empty() {
-        Default::default()
+    let fitted = if files.is_empty() {
+        Baselines::default()
     } else {
         baseline::fit(
             &files,
@@ -324,9 +324,9 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
             &|f, rec| facts_of(rec, f.shaft_hz.or(a.shaft_hz), f.load.clone(), true),
         )?
     };
-    machine.baselines = &pooled;
-    machine.state_baselines = &states;
-    machine.baseline_counts = &counts;
+    machine.baselines = &fitted.pooled;
+    machine.state_baselines = &fitted.states;
+    machine.baseline_counts = &fitted.counts;
     let mut rec = load_record(&a.input, &a, &opts)?;
     let names: Vec<String> = rec
         .chosen
@@ -359,13 +359,17 @@ fn gearbox_ref(a: &DiagnoseArgs, gearbox: &crate::gearbox::Gearbox, table: bool)
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_default(),
             None if gearbox.name() == crate::gearbox::Gearbox::paper_rig().name() => {
-                crate::service::gearboxes::BUILTIN_ID.to_string()
+                crate::machine::BUILTIN_GEARBOX_ID.to_string()
             }
             None => gearbox.name().to_string(),
         },
         name: gearbox.name().to_string(),
         hash: gearbox.hash.clone(),
-        table_status: if table { "ready" } else { "missing" }.into(),
+        table_status: if table {
+            TableStatus::Ready
+        } else {
+            TableStatus::Missing
+        },
         table_progress: if table { 1.0 } else { 0.0 },
     }
 }

@@ -99,12 +99,12 @@ pub fn run(a: GearboxArgs) -> Result<()> {
             let origin = a.gearbox.display().to_string();
             let probe = crate::gearbox::GearboxDescription::parse(&text, fmt, &origin)?;
             let id = a.id.unwrap_or_else(|| probe.name.clone());
-            if crate::service::http::check_gearbox_id(&id).is_err() {
+            if !crate::machine::is_valid_id(&id) {
                 bail!(
                     "a gearbox id is 1 to 64 characters of letters, digits, `.`, `_` and `-`, got `{id}`"
                 );
             }
-            if id == crate::service::gearboxes::BUILTIN_ID {
+            if id == crate::machine::BUILTIN_GEARBOX_ID {
                 bail!("`{id}` is the built-in paper rig; choose another --id");
             }
             let (row, _) = crate::service::gearboxes::gearbox_row(&id, &text, fmt, &origin)?;

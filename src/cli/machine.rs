@@ -7,7 +7,7 @@ use clap::{Args, Subcommand};
 
 use super::units::UnitArgs;
 use crate::database::DatabaseArg;
-use crate::service::gearboxes::BUILTIN_ID;
+use crate::machine::{BUILTIN_GEARBOX_ID as BUILTIN_ID, MAX_TACHO_PPR, TachoProblem, check_tacho};
 use crate::store::{MachineConfig, now_ms};
 
 #[derive(Debug, Args)]
@@ -72,7 +72,7 @@ pub fn run(a: MachineArgs) -> Result<()> {
 }
 
 fn check_id(id: &str) -> Result<()> {
-    if crate::service::http::check_machine_id(id).is_err() {
+    if !crate::machine::is_valid_id(id) {
         bail!(
             "a machine id is 1 to 64 characters of letters, digits, `.`, `_` and `-`, got `{id}`"
         );
@@ -126,17 +126,12 @@ fn set(s: SetArgs) -> Result<()> {
     {
         bail!("--input-shaft-hz must be a rate in Hz above 0 and at most 1000, got {hz}");
     }
-    if let Err(e) = crate::service::machines::check_tacho(
+    if let Err(e) = check_tacho(
         s.tacho_channel.as_deref(),
         s.tacho_ppr,
         s.channels.as_deref(),
     ) {
-        bail!(
-            "{}",
-            e.replace("`tacho_channel`", "--tacho-channel")
-                .replace("`tacho_ppr`", "--tacho-ppr")
-                .replace("`channels`", "--channels")
-        );
+        bail!("{}", tacho_message(&e));
     }
     let (channel_units, iso) = s
         .units
@@ -180,4 +175,21 @@ fn set(s: SetArgs) -> Result<()> {
         );
         Ok(())
     })
+}
+
+/// A tachometer problem in the command line's words (its flags).
+fn tacho_message(p: &TachoProblem) -> String {
+    match p {
+        TachoProblem::PulsesPerRev(got) => format!(
+            "--tacho-ppr is the tachometer's pulses per input-shaft revolution, a whole number \
+             from 1 to {MAX_TACHO_PPR}, got {got}"
+        ),
+        TachoProblem::ChannelName => {
+            "--tacho-channel is a channel name of 1 to 64 characters".into()
+        }
+        TachoProblem::ChannelDiagnosed(t) => format!(
+            "--tacho-channel `{t}` is also in --channels: the tachometer's channel gives the \
+             speed and is not diagnosed; list only the vibration channels in --channels"
+        ),
+    }
 }

@@ -39,12 +39,12 @@ use crate::gearbox::description::{GearboxDescription, MAX_DESCRIPTION_BYTES, Tex
 use crate::gearbox::{Gearbox, PAPER_RIG};
 use crate::keys::Scope;
 use crate::signature::precompute::{PrecomputeSpec, default_grid, partial_path, precompute};
-use crate::signature::{SignatureTable, SimulationSettings};
+use crate::signature::{SignatureTable, SimulationSettings, TableStatus};
 use crate::store::{GearboxRow, PutOutcome, StoreError, new_id, now_ms};
 use crate::time::rfc3339;
 
 /// Id of the built-in gearbox: the first paper's rig.
-pub const BUILTIN_ID: &str = "wang2019";
+pub const BUILTIN_ID: &str = crate::machine::BUILTIN_GEARBOX_ID;
 /// A claimed job's lease; renewed every [`PROGRESS_EVERY`] while it runs.
 pub const LEASE_MS: i64 = 30_000;
 const PROGRESS_EVERY: Duration = Duration::from_secs(1);
@@ -75,7 +75,7 @@ pub fn gearbox_row(
         description: gb.description.canonical_json(),
         hash: gb.hash.clone(),
         builtin: false,
-        status: "queued".into(),
+        status: TableStatus::Queued,
         progress: 0.0,
         error: None,
         claimed_by: None,
@@ -133,7 +133,7 @@ impl Tables {
         if row.builtin {
             return Ok(Some(app.diagnoser.clone()));
         }
-        if row.status != "ready" {
+        if row.status != TableStatus::Ready {
             return Ok(None);
         }
         if let Some(d) = lock(&self.diagnosers).get(&row.hash) {

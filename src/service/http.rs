@@ -11,14 +11,7 @@ use sha2::{Digest, Sha256};
 use super::error::{ApiError, ApiResult, problem_from_error};
 use super::wire::BodyFormat;
 
-/// Whether `id` is 1–64 characters of `A–Z a–z 0–9 . _ -` (machine and gearbox ids).
-pub fn is_valid_id(id: &str) -> bool {
-    !id.is_empty()
-        && id.len() <= 64
-        && id
-            .bytes()
-            .all(|b| b.is_ascii_alphanumeric() || b == b'.' || b == b'_' || b == b'-')
-}
+pub use crate::machine::is_valid_id;
 
 /// Machine ids: 1–64 characters of `A–Z a–z 0–9 . _ -`.
 pub fn check_machine_id(id: &str) -> ApiResult<()> {

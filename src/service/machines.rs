@@ -16,7 +16,7 @@
 //! machine's baseline per channel from the stored features of its baseline records (only those
 //! computed with the machine's current gearbox description).
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 
 use axum::Json;
@@ -31,12 +31,11 @@ use super::auth::Caller;
 use super::error::{ApiError, ApiResult, unknown_machine};
 use super::gearboxes::BUILTIN_ID;
 use super::http::{check_gearbox_id, check_machine_id, json_with_etag, read_body};
-use crate::assessment::state_baseline;
-use crate::assessment::{GearboxRef, TableDiagnoser};
-use crate::condition::StateBaseline;
+use crate::assessment::{Baselines, GearboxRef, StoredFeatures, TableDiagnoser};
 use crate::gearbox::Gearbox;
 use crate::keys::Scope;
-use crate::novelty::{MIN_BASELINE_RECORDS, MachineBaseline, RecordFeatures};
+use crate::novelty::{MIN_BASELINE_RECORDS, RecordFeatures};
+use crate::signature::TableStatus;
 use crate::store::{GearboxRow, MachineConfig, MachineRow, now_ms};
 use crate::time::rfc3339;
 
@@ -59,8 +58,8 @@ impl MachineContext {
             return None;
         }
         let g = &self.gearbox_row;
-        Some(match g.status.as_str() {
-            "failed" => format!(
+        Some(match g.status {
+            TableStatus::Failed => format!(
                 "the signature table of gearbox `{}` failed ({}): no wear degree; this diagnosis \
                  uses the machine's baseline and indicators only — PUT a corrected description",
                 g.id,
@@ -81,7 +80,7 @@ impl MachineContext {
             id: self.gearbox_row.id.clone(),
             name: self.gearbox_row.name.clone(),
             hash: self.gearbox_row.hash.clone(),
-            table_status: self.gearbox_row.status.clone(),
+            table_status: self.gearbox_row.status,
             table_progress: self.gearbox_row.progress,
         }
     }
@@ -138,15 +137,36 @@ pub async fn context_of(
     })
 }
 
-/// A machine's baselines per channel, fitted from the stored features of its baseline
-/// records computed with its gearbox description.
-#[derive(Debug, Default)]
-pub struct Baselines {
-    pub pooled: BTreeMap<String, MachineBaseline>,
-    /// State-aware, where enough baseline records carry a measured state.
-    pub states: BTreeMap<String, StateBaseline>,
-    /// Baseline records per channel.
-    pub counts: BTreeMap<String, usize>,
+/// The baselines this replica fitted, one entry per machine, kept by what they were fitted
+/// from: the machine's row (its creation time: a machine deleted and made again starts over),
+/// the gearbox description's hash and the machine's `baseline_version`, which the store raises
+/// with every change of the machine's baseline records. A record's ingest reads the machine's
+/// row anyway, so a baseline changed through another replica is seen at the next record.
+#[derive(Default)]
+pub struct BaselineCache {
+    fitted: std::sync::Mutex<HashMap<String, (BaselineKey, Arc<Baselines>)>>,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct BaselineKey {
+    created_at: i64,
+    hash: String,
+    version: i64,
+}
+
+impl BaselineCache {
+    fn get(&self, machine_id: &str, key: &BaselineKey) -> Option<Arc<Baselines>> {
+        let fitted = self.fitted.lock().unwrap_or_else(|p| p.into_inner());
+        fitted
+            .get(machine_id)
+            .filter(|(k, _)| k == key)
+            .map(|(_, b)| b.clone())
+    }
+
+    fn put(&self, machine_id: &str, key: BaselineKey, b: Arc<Baselines>) {
+        let mut fitted = self.fitted.lock().unwrap_or_else(|p| p.into_inner());
+        fitted.insert(machine_id.to_string(), (key, b));
+    }
 }
 
 /// The stored features of the machine's baseline records computed with gearbox description
@@ -159,49 +179,59 @@ pub async fn baseline_features(
     let rows = app.store.baseline_records(machine_id).await?;
     let mut per: BTreeMap<String, Vec<RecordFeatures>> = BTreeMap::new();
     for r in rows {
-        let Ok(f) = serde_json::from_str::<Value>(&r.features) else {
-            continue;
-        };
-        if f["gearbox_hash"].as_str() != Some(hash) {
+        let f = stored_features(&r)?;
+        if f.gearbox_hash != hash {
             continue;
         }
-        if let Some(chs) = f["channels"].as_object() {
-            for (name, c) in chs {
-                if let Ok(rf) =
-                    serde_json::from_value::<RecordFeatures>(c["novelty_features"].clone())
-                {
-                    per.entry(name.clone()).or_default().push(rf);
-                }
-            }
+        for (name, c) in f.channels {
+            per.entry(name).or_default().push(c.novelty_features);
         }
     }
     Ok(per)
 }
 
-/// The machine's baselines per channel, fitted from the stored features of its baseline
-/// records computed with gearbox description `hash`.
-pub async fn baselines(app: &AppState, machine_id: &str, hash: &str) -> ApiResult<Baselines> {
-    let per = baseline_features(app, machine_id, hash).await?;
-    let counts = per.iter().map(|(k, v)| (k.clone(), v.len())).collect();
-    let (pooled, states) = tokio::task::spawn_blocking(move || {
-        let pooled = per
-            .iter()
-            .filter(|(_, v)| v.len() >= MIN_BASELINE_RECORDS)
-            .filter_map(|(k, v)| MachineBaseline::fit(v).ok().map(|b| (k.clone(), b)))
-            .collect::<BTreeMap<_, _>>();
-        let states = per
-            .iter()
-            .filter_map(|(k, v)| Some((k.clone(), state_baseline(v)?.ok()?)))
-            .collect::<BTreeMap<_, _>>();
-        (pooled, states)
+/// A baseline record's stored features; a row that does not read is an error that names it
+/// (the service wrote every row itself: a row it cannot read is not skipped unseen).
+fn stored_features(r: &crate::store::BaselineRecord) -> ApiResult<StoredFeatures> {
+    serde_json::from_str(&r.features).map_err(|e| {
+        ApiError::internal(format!(
+            "the stored features of baseline record `{}` do not read ({e}); unmark it \
+             (DELETE /v1/machines/{{machine_id}}/baseline/{})",
+            r.id, r.id
+        ))
     })
-    .await
-    .map_err(|e| ApiError::internal(format!("fitting the baseline failed: {e}")))?;
-    Ok(Baselines {
-        pooled,
-        states,
-        counts,
-    })
+}
+
+/// The machine's baselines per channel, fitted (by the core's one fitter, [`Baselines::fit`])
+/// from the stored features of its baseline records computed with gearbox description `hash`;
+/// refitted only when the machine's baseline or gearbox changed since the last fit
+/// ([`BaselineCache`]). `None`: a machine without a row, which has no records yet.
+pub async fn baselines(
+    app: &AppState,
+    machine: Option<&MachineRow>,
+    hash: &str,
+) -> ApiResult<Arc<Baselines>> {
+    let Some(m) = machine else {
+        return Ok(Arc::new(Baselines::default()));
+    };
+    let key = BaselineKey {
+        created_at: m.created_at,
+        hash: hash.to_string(),
+        version: m.baseline_version,
+    };
+    if let Some(b) = app.baselines.get(&m.id, &key) {
+        return Ok(b);
+    }
+    let per = baseline_features(app, &m.id, hash).await?;
+    let fitted = tokio::task::spawn_blocking(move || Baselines::fit(&per))
+        .await
+        .map_err(|e| ApiError::internal(format!("fitting the baseline failed: {e}")))?;
+    for (channel, e) in &fitted.unfitted {
+        tracing::warn!(machine = %m.id, channel = %channel, error = %e, "a baseline could not be fitted");
+    }
+    let fitted = Arc::new(fitted);
+    app.baselines.put(&m.id, key, fitted.clone());
+    Ok(fitted)
 }
 
 /// A JSON object as `T` (serde alone also takes an array for a struct: `[null, null]`).
@@ -235,38 +265,24 @@ pub struct MachineBody {
     pub iso_20816: Option<super::units::IsoBody>,
 }
 
-/// The default name of a record's tachometer channel, for a machine that names none.
-pub const DEFAULT_TACHO_CHANNEL: &str = "tacho";
-/// Most tachometer pulses per revolution accepted (a fine shaft encoder).
-pub const MAX_TACHO_PPR: i64 = crate::condition::state::MAX_PULSES_PER_REV as i64;
+pub use crate::machine::{DEFAULT_TACHO_CHANNEL, MAX_TACHO_PPR, TachoProblem, check_tacho};
 
-/// Check a machine's tachometer settings: `tacho_channel` a channel name (1 to 64
-/// characters) that is not among the `channels` to diagnose, `tacho_ppr` from 1 to
-/// [`MAX_TACHO_PPR`]. `Err` is a message for the caller.
-pub fn check_tacho(
-    tacho_channel: Option<&str>,
-    tacho_ppr: i64,
-    channels: Option<&[String]>,
-) -> Result<(), String> {
-    if !(1..=MAX_TACHO_PPR).contains(&tacho_ppr) {
-        return Err(format!(
+/// A tachometer problem in the API's words (its members `tacho_channel`, `tacho_ppr`,
+/// `channels`).
+pub fn tacho_detail(p: &TachoProblem) -> String {
+    match p {
+        TachoProblem::PulsesPerRev(got) => format!(
             "`tacho_ppr` is the tachometer's pulses per input-shaft revolution, a whole number \
-             from 1 to {MAX_TACHO_PPR}, got {tacho_ppr}"
-        ));
-    }
-    let Some(t) = tacho_channel else {
-        return Ok(());
-    };
-    if t.is_empty() || t.len() > 64 {
-        return Err("`tacho_channel` is a channel name of 1 to 64 characters".into());
-    }
-    if channels.is_some_and(|c| c.iter().any(|c| c == t)) {
-        return Err(format!(
+             from 1 to {MAX_TACHO_PPR}, got {got}"
+        ),
+        TachoProblem::ChannelName => {
+            "`tacho_channel` is a channel name of 1 to 64 characters".into()
+        }
+        TachoProblem::ChannelDiagnosed(t) => format!(
             "`tacho_channel` `{t}` is also in `channels`: the tachometer's channel gives the \
              speed and is not diagnosed; list only the vibration channels in `channels`"
-        ));
+        ),
     }
-    Ok(())
 }
 
 /// The configuration part of a machine's JSON.
@@ -359,7 +375,11 @@ pub async fn put(
         }
     };
     check_tacho(b.tacho_channel.as_deref(), tacho_ppr, b.channels.as_deref()).map_err(|e| {
-        ApiError::unprocessable("invalid-machine", "Invalid machine configuration", e)
+        ApiError::unprocessable(
+            "invalid-machine",
+            "Invalid machine configuration",
+            tacho_detail(&e),
+        )
     })?;
     let (channel_units, iso) = super::units::check(
         b.channel_units,
@@ -409,23 +429,23 @@ pub async fn baseline_json(app: &AppState, m: &MachineRow) -> ApiResult<Value> {
         None => app.store.get_gearbox(BUILTIN_ID).await?.map(|r| r.hash),
     };
     let b = match &ctx_hash {
-        Some(h) => baselines(app, &m.id, h).await?,
-        None => Baselines::default(),
+        Some(h) => baselines(app, Some(m), h).await?,
+        None => Arc::new(Baselines::default()),
     };
     let (fitted, counts) = (&b.pooled, &b.counts);
-    let records: Vec<Value> = rows
+    let records = rows
         .iter()
         .map(|r| {
-            let f: Value = serde_json::from_str(&r.features).unwrap_or(Value::Null);
-            json!({
+            let f = stored_features(r)?;
+            Ok(json!({
                 "record_id": r.id,
                 "received_at": rfc3339(r.received_at),
                 "baseline_at": r.baseline_at.map(rfc3339),
-                "channels": f["channels"].as_object().map(|c| c.keys().cloned().collect::<Vec<_>>()),
-                "current_gearbox": ctx_hash.is_some() && f["gearbox_hash"].as_str() == ctx_hash.as_deref(),
-            })
+                "channels": f.channels.keys().collect::<Vec<_>>(),
+                "current_gearbox": ctx_hash.as_deref() == Some(f.gearbox_hash.as_str()),
+            }))
         })
-        .collect();
+        .collect::<ApiResult<Vec<Value>>>()?;
     let channels: BTreeMap<String, Value> = counts
         .iter()
         .map(|(k, n)| {

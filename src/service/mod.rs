@@ -19,6 +19,7 @@ use axum::response::{IntoResponse, Response};
 use axum::routing::{delete, get, post};
 use tokio::net::TcpListener;
 use tokio::sync::{Notify, watch};
+use tower_http::timeout::TimeoutLayer;
 use tower_http::trace::TraceLayer;
 
 pub mod alerts;
@@ -68,6 +69,8 @@ pub struct Inner {
     pub tables: gearboxes::Tables,
     /// The built-in gearbox (the paper's rig), resolved once.
     pub builtin_gearbox: Arc<crate::gearbox::Gearbox>,
+    /// The machines' fitted baselines, refitted when a baseline changes.
+    pub baselines: machines::BaselineCache,
 }
 
 impl std::ops::Deref for AppState {
@@ -103,6 +106,7 @@ impl AppState {
             job_wake: Notify::new(),
             tables: gearboxes::Tables::default(),
             builtin_gearbox: Arc::new(crate::gearbox::Gearbox::paper_rig()),
+            baselines: machines::BaselineCache::default(),
         }))
     }
 }
@@ -170,6 +174,10 @@ pub fn router(state: AppState) -> Router {
         .route("/style.css", get(dashboard::style));
     api.fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed)
+        .layer(TimeoutLayer::with_status_code(
+            TIMED_OUT,
+            state.settings.limits.request_timeout,
+        ))
         .layer(middleware::from_fn_with_state(state.clone(), observe))
         .layer(TraceLayer::new_for_http().make_span_with(|req: &Request| {
             // Method and path only: never headers (they carry keys). `key_id` is filled in
@@ -246,7 +254,11 @@ async fn method_not_allowed(req: Request) -> ApiError {
     )
 }
 
-/// Request timeout and metrics around every request.
+/// What tower-http's timeout layer answers a request it cut off with (an empty body); no
+/// handler answers it, and [`observe`] turns it into the `request-timeout` problem.
+const TIMED_OUT: StatusCode = StatusCode::GATEWAY_TIMEOUT;
+
+/// Metrics around every request, and the problem of a request the timeout layer cut off.
 async fn observe(State(app): State<AppState>, req: Request, next: Next) -> Response {
     let route = req
         .extensions()
@@ -256,9 +268,14 @@ async fn observe(State(app): State<AppState>, req: Request, next: Next) -> Respo
     let method = req.method().to_string();
     let started = Instant::now();
     let limit = app.settings.limits.request_timeout;
-    let resp = match tokio::time::timeout(limit, next.run(req)).await {
-        Ok(r) => r,
-        Err(_) => ApiError::new(
+    let resp = next.run(req).await;
+    let cut_off = resp.status() == TIMED_OUT
+        && !resp
+            .headers()
+            .contains_key(axum::http::header::CONTENT_TYPE);
+    let resp = match cut_off {
+        false => resp,
+        true => ApiError::new(
             StatusCode::SERVICE_UNAVAILABLE,
             "request-timeout",
             "Request timed out",

@@ -25,8 +25,8 @@ use super::metrics::StageClock;
 use super::spectrum::{PlotSpectrum, plot_from_spectrum, plot_spectrum};
 use super::wire::{BodyFormat, Decoded, RecordQuery, decode, parse_query};
 use crate::assessment::{
-    Assessment, Machine, MachineCalibration, RecordFacts, TableDiagnoser, TachoChannel, Thresholds,
-    assess,
+    Assessment, Baselines, Level, Machine, MachineCalibration, RecordFacts, TableDiagnoser,
+    TachoChannel, Thresholds, assess,
 };
 use crate::gearbox::Gearbox;
 use crate::keys::Scope;
@@ -197,9 +197,11 @@ pub async fn accept(
         record_id: new_id(),
         diagnosis_id: new_id(),
     };
-    let body = serde_json::to_value(&assessment)
+    // Written once, straight from the typed assessment: the stored diagnosis, and the answer
+    // with the ids spliced in.
+    let body = serde_json::to_string(&assessment)
         .map_err(|e| ApiError::internal(format!("the assessment did not serialise: {e}")))?;
-    let response_text = answer(&body, &ids, machine_id, assessment.level()).to_string();
+    let response_text = answer(&body, &ids, machine_id, assessment.level());
     let mut ing = Ingest {
         record: record_row(
             app,
@@ -213,14 +215,14 @@ pub async fn accept(
         ),
         diagnosis: diagnosis_row(
             &assessment,
-            &body,
+            body,
             spectrum.as_ref(),
             &ids,
             machine_id,
             measured_at(&dec, &ids),
         ),
         idempotency: idem.row(&response_text),
-        event_extras: event_extras(&body),
+        event_extras: event_extras(&assessment),
         registered_only: app.settings.require_registered_machines,
         alert: Some(AlertInput {
             severity: assessment.severity(&app.settings.thresholds),
@@ -243,7 +245,7 @@ pub async fn accept(
     app.metrics.stages(&clock);
     app.webhook_wake.notify_one();
     let ea = assessment.wear().map(|w| w.estimate);
-    tracing::info!(machine = machine_id, diagnosis = %ids.diagnosis_id, ea, alert_level = assessment.level(), "record accepted");
+    tracing::info!(machine = machine_id, diagnosis = %ids.diagnosis_id, ea, alert_level = %assessment.level(), "record accepted");
     Ok(Accepted::Created {
         response_text,
         diagnosis_id: ids.diagnosis_id,
@@ -337,11 +339,17 @@ fn tacho_of(
 /// What each webhook payload of the record carries besides the diagnosis row's members: the
 /// deciding channel's `findings` (strongest first) and the record's `operating_state`, as
 /// answered (and, added by the caller, the machine's `trend_summary`).
-fn event_extras(body: &Value) -> serde_json::Map<String, Value> {
-    ["findings", "operating_state"]
-        .into_iter()
-        .map(|k| (k.to_string(), body.get(k).cloned().unwrap_or(Value::Null)))
-        .collect()
+fn event_extras(a: &Assessment) -> serde_json::Map<String, Value> {
+    let mut m = serde_json::Map::new();
+    m.insert(
+        "findings".into(),
+        serde_json::to_value(&a.findings).unwrap_or(Value::Null),
+    );
+    m.insert(
+        "operating_state".into(),
+        serde_json::to_value(&a.operating_state).unwrap_or(Value::Null),
+    );
+    m
 }
 
 /// The ids and time the service gives an accepted record.
@@ -351,17 +359,21 @@ struct Ids {
     diagnosis_id: String,
 }
 
-/// The answer: the assessment plus the ids the service gave it.
-fn answer(body: &Value, ids: &Ids, machine_id: &str, level: &'static str) -> Value {
-    let mut response = body.clone();
-    if let Value::Object(m) = &mut response {
-        m.insert("id".into(), ids.diagnosis_id.clone().into());
-        m.insert("machine_id".into(), machine_id.into());
-        m.insert("record_id".into(), ids.record_id.clone().into());
-        m.insert("created_at".into(), crate::time::rfc3339(ids.now).into());
-        m.insert("alert_level".into(), level.into());
+/// The answer: the assessment's members (`body`, a JSON object's text) and the ids and time
+/// the service gave it, none of which the assessment has.
+fn answer(body: &str, ids: &Ids, machine_id: &str, level: Level) -> String {
+    let given = json!({
+        "id": ids.diagnosis_id,
+        "machine_id": machine_id,
+        "record_id": ids.record_id,
+        "created_at": crate::time::rfc3339(ids.now),
+        "alert_level": level,
+    })
+    .to_string();
+    match body.strip_suffix('}') {
+        Some(open) if open.len() > 1 => format!("{open},{}", &given[1..]),
+        _ => given,
     }
-    response
 }
 
 fn f32_bytes(x: &[f64]) -> Vec<u8> {
@@ -370,38 +382,6 @@ fn f32_bytes(x: &[f64]) -> Vec<u8> {
         v.extend_from_slice(&(*s as f32).to_le_bytes());
     }
     v
-}
-
-/// The features stored with a record: the deciding channel's lines and indicators, the
-/// gearbox description they were computed with, and each channel's novelty features (what a
-/// baseline is later fitted from) and alert level.
-fn stored_features(a: &Assessment) -> Value {
-    let mut features = match &a.deciding_channel().reading {
-        Some(r) => {
-            let d = &r.diagnosis;
-            json!({
-                "lines": d.lines,
-                "condition_indicators": d.condition_indicators,
-                "f1_hz": d.f1_hz,
-                "omega1": d.omega1,
-            })
-        }
-        None => json!({}),
-    };
-    features["gearbox_id"] = a.gearbox.id.clone().into();
-    features["gearbox_hash"] = a.gearbox.hash.clone().into();
-    features["channels"] = a
-        .assessed
-        .iter()
-        .map(|r| {
-            (
-                r.name.clone(),
-                json!({"novelty_features": r.features, "alert_level": r.alert.level}),
-            )
-        })
-        .collect::<serde_json::Map<_, _>>()
-        .into();
-    features
 }
 
 /// The record's row: what was received (raw samples kept while the retention allows).
@@ -431,7 +411,7 @@ fn record_row(
         shaft_hz: dec.shaft_hz,
         sample_count: sample_count as i64,
         sha256: idem.body_sha256.clone(),
-        features: stored_features(a).to_string(),
+        features: serde_json::to_string(&a.stored_features()).unwrap_or_default(),
         samples: keep_raw.then(|| {
             let mut v = Vec::with_capacity(4 * sample_count * channels.len());
             for (_, x) in channels {
@@ -448,7 +428,7 @@ fn record_row(
 /// spectrum plot.
 fn diagnosis_row(
     a: &Assessment,
-    body: &Value,
+    body: String,
     spectrum: Option<&PlotSpectrum>,
     ids: &Ids,
     machine_id: &str,
@@ -472,9 +452,9 @@ fn diagnosis_row(
         ea_estimate: ea,
         ea_lower: lower,
         ea_upper: upper,
-        alert_level: a.level().into(),
+        alert_level: a.level(),
         motion_state: motion,
-        body: body.to_string(),
+        body,
         spectrum: serde_json::to_string(&spectrum).unwrap_or_else(|_| "null".into()),
         has_wear: wear.is_some(),
         novelty_score: decide.novelty.as_ref().map(|n| n.score),
@@ -639,7 +619,7 @@ struct AssessJob {
     chosen: Vec<usize>,
     ctx: MachineContext,
     calibration: Option<MachineCalibration>,
-    baselines: super::machines::Baselines,
+    baselines: Arc<Baselines>,
     thresholds: Thresholds,
     /// Posted with `?baseline=true`.
     declared_healthy: bool,
@@ -671,7 +651,8 @@ impl RecordRequest {
             tacho_index,
         )?;
         let units = super::units::machine_units(ctx.machine.as_ref())?;
-        let baselines = super::machines::baselines(app, machine_id, &ctx.gearbox_row.hash).await?;
+        let baselines =
+            super::machines::baselines(app, ctx.machine.as_ref(), &ctx.gearbox_row.hash).await?;
         let calibration = app
             .store
             .get_calibration(machine_id)
@@ -764,5 +745,25 @@ fn plot(
             let f1 = input_shaft_hz.map(|h| gearbox.f1_hz(h)).unwrap_or(f64::NAN);
             plot_spectrum(samples, fs, f1, &[])
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_answer_is_the_assessment_with_the_ids_and_time() {
+        let ids = Ids {
+            now: 0,
+            record_id: "r".into(),
+            diagnosis_id: "d".into(),
+        };
+        let got = answer(r#"{"alert":{"level":"ok"},"x":[1]}"#, &ids, "m", Level::Ok);
+        let want = json!({"alert": {"level": "ok"}, "x": [1], "id": "d", "machine_id": "m",
+            "record_id": "r", "created_at": crate::time::rfc3339(0), "alert_level": "ok"});
+        assert_eq!(serde_json::from_str::<Value>(&got).unwrap(), want);
+        let bare: Value = serde_json::from_str(&answer("{}", &ids, "m", Level::Ok)).unwrap();
+        assert_eq!(bare["id"], "d");
     }
 }

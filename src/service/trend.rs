@@ -1,4 +1,4 @@
-//! A machine's trend (issue 33 item 1): `GET /v1/machines/{id}/trend?series=&channel=` and the
+//! A machine's trend: `GET /v1/machines/{id}/trend?series=&channel=` and the
 //! machine view's `trend_summary`. The series are read in measurement order (`measured_at`:
 //! the record's `recorded_at`, else its receive time) and fitted by the core's
 //! [`trend`](crate::trend) (Theil–Sen, Mann–Kendall, bootstrap intervals).

@@ -1,4 +1,4 @@
-//! Alerts as events (issue 33 item 3): an alert opens after N records at warning (not after
+//! Alerts as events: an alert opens after N records at warning (not after
 //! N − 1), is acknowledged with a note (a key with the `acknowledge` scope; a read key gets
 //! 403; twice is 409), closes after M low records, keeps its audit trail, and webhooks fire on
 //! transitions only — a machine hovering at the threshold opens one alert, not one per record.
@@ -239,7 +239,7 @@ async fn alert_lifecycle(b: Backend) {
     assert_eq!(events, expected);
 }
 
-/// Issue 33's target through the service: a machine alternating around the warning threshold
+/// The target through the service: a machine alternating around the warning threshold
 /// for 200 records opens at most one alert.
 async fn hovering_machine_opens_one_alert(b: Backend) {
     let Some(app) = spawn_app(b, |s| {

@@ -835,7 +835,7 @@ async fn dashboard_shows_the_fleet_by_severity_and_a_machine_from_the_url() {
         "{drawn}"
     );
 
-    // A real machine's latest diagnosis (issue 31): its measured speed and load, its findings
+    // A real machine's latest diagnosis: its measured speed and load, its findings
     // in words, and no wear number when the model does not fit.
     let real = d
         .script(

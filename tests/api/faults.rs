@@ -1,4 +1,4 @@
-//! Faults (issue 7): the real binary killed with SIGKILL in the middle of concurrent ingests,
+//! Faults: the real binary killed with SIGKILL in the middle of concurrent ingests,
 //! and PostgreSQL going away while the service runs (through a [`CutProxy`], so the shared
 //! database is never stopped). Webhook receivers that are down: `webhooks.rs`.
 //!

@@ -1,4 +1,4 @@
-//! Gearboxes, machines and baselines through the API (issue 14), on both stores: a described
+//! Gearboxes, machines and baselines through the API, on both stores: a described
 //! gearbox's table precomputed in the background (and resumed after a restart), a machine
 //! pointed at it, a record diagnosed before and after the table is ready, a baseline that makes
 //! a machine the model does not fit judgeable, and the `unknown` state when nothing vouches.
@@ -17,6 +17,7 @@ use crate::helpers::*;
 both_stores!(
     a_described_gearbox_is_tabled_in_the_background_and_diagnoses_its_machine,
     a_baseline_makes_a_machine_the_model_does_not_fit_judgeable,
+    a_baseline_changed_through_one_replica_is_used_by_the_other,
     a_table_job_interrupted_by_a_restart_resumes,
     every_channel_is_diagnosed_and_the_worst_decides,
 );
@@ -172,7 +173,7 @@ async fn a_described_gearbox_is_tabled_in_the_background_and_diagnoses_its_machi
     // A record before the table is ready is stored and judged without a wear degree; with no
     // baseline either, nothing vouches for the machine: `unknown`, with what to do.
     let early = app.store.get_gearbox("spur").await.unwrap().unwrap();
-    if early.status != "ready" {
+    if early.status != gearwear::signature::TableStatus::Ready {
         let (s, d) = post_record(&app, "m-spur", "", &described_record(SPUR, 0.3, 1)).await;
         assert_eq!(s, 201, "{d}");
         if d["gearbox"]["table_status"] != "ready" {
@@ -233,7 +234,11 @@ async fn a_described_gearbox_is_tabled_in_the_background_and_diagnoses_its_machi
             .and_then(|v| v.parse().ok())
             .unwrap_or(0.0)
     };
-    let posted = if early.status != "ready" { 2.0 } else { 1.0 };
+    let posted = if early.status != gearwear::signature::TableStatus::Ready {
+        2.0
+    } else {
+        1.0
+    };
     assert_eq!(runs("features"), posted, "{text}");
     assert!(runs("diagnosis") >= 1.0, "{text}");
     assert!(
@@ -369,6 +374,68 @@ async fn a_baseline_makes_a_machine_the_model_does_not_fit_judgeable(b: Backend)
     );
 }
 
+/// Each replica keeps the baselines it fitted and refits only when the machine's baseline
+/// changed: a change made through one replica (records posted as healthy, the baseline
+/// cleared, records marked again) is what the other judges the next record by.
+async fn a_baseline_changed_through_one_replica_is_used_by_the_other(b: Backend) {
+    let Some(a) = spawn_app(b, |_| {}).await else {
+        return;
+    };
+    let mut other = a.replica().await;
+    let mut ids = Vec::new();
+    for seed in 2..=4 {
+        let (s, d) =
+            post_record(&a, "shared", "?baseline=true", &foreign_record(seed, false)).await;
+        assert_eq!(s, 201, "{d}");
+        ids.push(d["record_id"].clone());
+    }
+    let judged = |d: &Value| {
+        (
+            d["baseline"]["records"].clone(),
+            d["novelty"]["score"].clone(),
+        )
+    };
+    let (s, first) = post_record(&other, "shared", "", &foreign_record(5, false)).await;
+    assert_eq!(s, 201, "{first}");
+    assert_eq!(first["baseline"]["records"], 3, "{first}");
+    assert!(first["novelty"]["score"].as_f64().is_some(), "{first}");
+    // Cleared through the first replica: the other has no baseline for the next record.
+    let r = a
+        .client
+        .delete(a.url("/v1/machines/shared/baseline"))
+        .bearer_auth(&a.admin_key)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 204);
+    let (_, d) = post_record(&other, "shared", "", &foreign_record(5, false)).await;
+    assert_eq!(judged(&d), (json!(0), Value::Null), "{d}");
+    // Marked again through the first: the same baseline, the same judgement as before.
+    let r = a
+        .client
+        .post(a.url("/v1/machines/shared/baseline"))
+        .bearer_auth(&a.admin_key)
+        .json(&json!({"record_ids": ids}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 200);
+    let (_, d) = post_record(&other, "shared", "", &foreign_record(5, false)).await;
+    assert_eq!(judged(&d), judged(&first), "{d}");
+    // A fourth healthy record posted through the other replica counts at once on the first.
+    let (s, d) = post_record(
+        &other,
+        "shared",
+        "?baseline=true",
+        &foreign_record(8, false),
+    )
+    .await;
+    assert_eq!(s, 201, "{d}");
+    let (_, d) = post_record(&a, "shared", "", &foreign_record(5, false)).await;
+    assert_eq!(d["baseline"]["records"], 4, "{d}");
+    other.stop().await;
+}
+
 async fn a_table_job_interrupted_by_a_restart_resumes(b: Backend) {
     let Some(mut app) = spawn_app(b, |_| {}).await else {
         return;
@@ -380,10 +447,13 @@ async fn a_table_job_interrupted_by_a_restart_resumes(b: Backend) {
     let t0 = Instant::now();
     loop {
         let g = app.store.get_gearbox(&id).await.unwrap().unwrap();
-        if g.status == "running" {
+        if g.status == gearwear::signature::TableStatus::Running {
             break;
         }
-        assert!(g.status == "queued", "{g:?}");
+        assert!(
+            g.status == gearwear::signature::TableStatus::Queued,
+            "{g:?}"
+        );
         assert!(t0.elapsed() < Duration::from_secs(60), "never started");
         tokio::time::sleep(Duration::from_millis(20)).await;
     }

@@ -299,6 +299,19 @@ impl TestApp {
         }
     }
 
+    /// A second replica: another server (its own store connections, caches and port) on the
+    /// same database, with the same keys. Dropped before `self`, which owns the database.
+    pub async fn replica(&self) -> TestApp {
+        let store = store::connect(&self.settings.database_url)
+            .await
+            .expect("store");
+        let mut other = start(self.settings.clone(), store).await;
+        other.admin_key = self.admin_key.clone();
+        other.ingest_key = self.ingest_key.clone();
+        other.read_key = self.read_key.clone();
+        other
+    }
+
     /// Stop, then start a new server process-equivalent on the same database.
     pub async fn restart(&mut self, tweak: impl FnOnce(&mut Settings)) {
         self.stop().await;
@@ -468,7 +481,7 @@ pub fn spec() -> &'static Value {
     S.get_or_init(|| {
         let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/openapi.yaml"))
             .expect("openapi.yaml");
-        serde_yaml::from_str(&text).expect("openapi.yaml parses")
+        serde_saphyr::from_str(&text).expect("openapi.yaml parses")
     })
 }
 

@@ -1,4 +1,4 @@
-//! A machine's lifecycle (issue 32), on both stores: `DELETE /v1/machines/{id}` takes the
+//! A machine's lifecycle, on both stores: `DELETE /v1/machines/{id}` takes the
 //! machine and everything of it and nothing else, tells the webhooks, needs `admin`, and a
 //! replayed `Idempotency-Key` after it is a new request; `--require-registered-machines`
 //! refuses records of machines that were not PUT (before the diagnosis and inside the

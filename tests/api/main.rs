@@ -10,6 +10,7 @@ mod bad_records;
 mod browser;
 mod calibration;
 mod cli;
+mod doors;
 mod faults;
 mod gearboxes;
 mod lifecycle;

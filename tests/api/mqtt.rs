@@ -1,6 +1,6 @@
 //! MQTT ingest against a real broker: Debian's `mosquitto`, one instance per test on a free
 //! port (persistence on, so the QoS 1 sessions survive its restarts), published to with
-//! rumqttc.
+//! rumqttc. Skips (with a message) only when mosquitto is absent and `CI` is not set.
 
 use std::path::PathBuf;
 use std::process::{Child, Command};
@@ -13,14 +13,29 @@ use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
 use crate::helpers::*;
 
 /// A mosquitto of the test's own.
-struct Broker {
+pub(crate) struct Broker {
     port: u16,
     dir: PathBuf,
     child: Option<Child>,
 }
 
+/// Debian's mosquitto binary.
+const MOSQUITTO: &str = "/usr/sbin/mosquitto";
+
 impl Broker {
-    fn start() -> Broker {
+    /// A broker of the test's own; `None` (after saying why) when mosquitto is not installed
+    /// and `CI` is not set. Under `CI` a missing broker is a failure.
+    pub(crate) fn start() -> Option<Broker> {
+        if !std::path::Path::new(MOSQUITTO).exists() {
+            let msg = format!(
+                "{MOSQUITTO} not found (apt-get install -y mosquitto); the MQTT test did NOT run"
+            );
+            if in_ci() {
+                panic!("{msg} (CI is set, so this is a failure)");
+            }
+            eprintln!("SKIP: {msg}");
+            return None;
+        }
         let port = std::net::TcpListener::bind("127.0.0.1:0")
             .unwrap()
             .local_addr()
@@ -48,15 +63,15 @@ impl Broker {
             child: None,
         };
         b.spawn();
-        b
+        Some(b)
     }
 
     fn spawn(&mut self) {
-        let child = Command::new("/usr/sbin/mosquitto")
+        let child = Command::new(MOSQUITTO)
             .arg("-c")
             .arg(self.dir.join("mosquitto.conf"))
             .spawn()
-            .expect("mosquitto (apt-get install -y mosquitto)");
+            .expect("mosquitto starts");
         self.child = Some(child);
         for _ in 0..200 {
             if std::net::TcpStream::connect(("127.0.0.1", self.port)).is_ok() {
@@ -99,7 +114,7 @@ impl Drop for Broker {
     }
 }
 
-fn mqtt_settings(broker: &Broker, client_id: &str) -> MqttSettings {
+pub(crate) fn mqtt_settings(broker: &Broker, client_id: &str) -> MqttSettings {
     MqttSettings::parse(
         &broker.url(),
         "plant/+/vibration",
@@ -111,7 +126,7 @@ fn mqtt_settings(broker: &Broker, client_id: &str) -> MqttSettings {
 
 /// A publisher (or listener) with a persistent session whose event loop runs in a task that
 /// reconnects; incoming publishes go to the returned channel.
-fn client(
+pub(crate) fn client(
     broker: &Broker,
     id: &str,
 ) -> (
@@ -176,13 +191,15 @@ const MACHINES: usize = 4;
 /// `n` records over [`MACHINES`] machines, QoS 1, the broker restarted after a third and
 /// after two thirds were handed to the publisher: every record stored exactly once.
 async fn records_survive_broker_restarts(backend: Backend, n: usize) {
-    let mut broker = Broker::start();
+    let Some(mut broker) = Broker::start() else {
+        return;
+    };
     let settings = mqtt_settings(&broker, "gearwear-test");
     let Some(mut app) = spawn_app(backend, |s| s.mqtt = Some(settings)).await else {
         return;
     };
     // The broker drops what is published before any subscription matches it: publish once
-    // the service has subscribed (the first runs lost their first few dozen records so).
+    // the service has subscribed (otherwise the first few dozen records are lost).
     wait_connected(&app).await;
     let started = std::time::Instant::now();
     let (publisher, _) = client(&broker, "test-publisher");
@@ -263,7 +280,9 @@ async fn mqtt_records_are_stored_once_across_broker_restarts_postgres() {
 /// A bad payload: its problem on the error topic, and the next good record is stored.
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn a_bad_payload_goes_to_the_error_topic() {
-    let broker = Broker::start();
+    let Some(broker) = Broker::start() else {
+        return;
+    };
     let settings = mqtt_settings(&broker, "gearwear-bad");
     let Some(app) = spawn_app(Backend::Sqlite, |s| s.mqtt = Some(settings)).await else {
         return;
@@ -276,6 +295,21 @@ async fn a_bad_payload_goes_to_the_error_topic() {
     let (publisher, _) = client(&broker, "test-bad-publisher");
     // Wait for the service's subscription: the metrics say so.
     wait_connected(&app).await;
+    // And for the listener's: a probe published to the error topic comes back (on a loaded
+    // machine its first connection can fail, and the subscription with it).
+    let probe = b"probe".to_vec();
+    let mut heard = false;
+    for _ in 0..60 {
+        publisher
+            .publish("gearwear/errors", QoS::AtLeastOnce, false, probe.clone())
+            .await
+            .unwrap();
+        if let Ok(Some(_)) = tokio::time::timeout(Duration::from_secs(1), errors.recv()).await {
+            heard = true;
+            break;
+        }
+    }
+    assert!(heard, "the listener never heard its probe");
     let bad: [(&str, Vec<u8>); 3] = [
         (
             "plant/m1/vibration",
@@ -294,11 +328,14 @@ async fn a_bad_payload_goes_to_the_error_topic() {
             .unwrap();
     }
     let mut slugs = Vec::new();
-    for _ in 0..bad.len() {
+    while slugs.len() < bad.len() {
         let p = tokio::time::timeout(Duration::from_secs(60), errors.recv())
             .await
             .expect("a problem on gearwear/errors")
             .unwrap();
+        if p.payload[..] == probe[..] {
+            continue;
+        }
         let v: serde_json::Value = serde_json::from_slice(&p.payload).unwrap();
         assert!(v["detail"].as_str().is_some_and(|d| !d.is_empty()), "{v}");
         assert!(v["topic"].as_str().unwrap().starts_with("plant/"), "{v}");
@@ -341,7 +378,7 @@ async fn a_bad_payload_goes_to_the_error_topic() {
     assert_eq!(stored, 1, "problems: {more:?}");
 }
 
-async fn wait_connected(app: &TestApp) {
+pub(crate) async fn wait_connected(app: &TestApp) {
     for _ in 0..400 {
         let m = app.get("/metrics").await.text().await.unwrap();
         if m.contains("gearwear_mqtt_connected 1") {

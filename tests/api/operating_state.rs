@@ -1,4 +1,4 @@
-//! Real machines through the API (issue 31), on both stores: a machine with a described
+//! Real machines through the API, on both stores: a machine with a described
 //! two-stage gearbox and a tachometer channel, its healthy records posted at three speeds and
 //! two loads; the baseline's coverage of operating states, a healthy record judged at its
 //! state, a record at a speed the baseline does not cover (`unknown`, naming the state), and
@@ -24,10 +24,10 @@ use crate::helpers::*;
 
 both_stores!(a_tachometer_machine_is_judged_at_its_operating_state);
 
-const HELICAL: &str = include_str!("../../configs/gearboxes/phm09-helical.toml");
-const FS: f64 = 20_000.0;
+pub(crate) const HELICAL: &str = include_str!("../../configs/gearboxes/phm09-helical.toml");
+pub(crate) const FS: f64 = 20_000.0;
 const SECONDS: f64 = 1.5;
-const PPR: usize = 10;
+pub(crate) const PPR: usize = 10;
 
 /// The machine's three channels at input rate `input_hz` (Hz), everything locked to the input
 /// shaft's angle θ (a random start angle per `seed`): `tacho` a square wave of [`PPR`]
@@ -37,7 +37,11 @@ const PPR: usize = 10;
 /// modulation by the shafts carrying each gear (in: θ, idler: θ/3, out: θ/5), small shaft
 /// lines and noise. `idler_damage` adds a ringing impulse once per revolution of the idler
 /// shaft, as a cracked tooth on it would.
-fn channels(input_hz: f64, seed: u64, idler_damage: bool) -> [(&'static str, Vec<f64>); 3] {
+pub(crate) fn channels(
+    input_hz: f64,
+    seed: u64,
+    idler_damage: bool,
+) -> [(&'static str, Vec<f64>); 3] {
     let n = (FS * SECONDS) as usize;
     let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(11);
     let mut uniform = move || {
@@ -91,7 +95,7 @@ fn channels(input_hz: f64, seed: u64, idler_damage: bool) -> [(&'static str, Vec
 }
 
 /// [`channels`] as a JSON record body (`load`, when given, in the body).
-fn record(input_hz: f64, seed: u64, idler_damage: bool, load: Option<&str>) -> Value {
+pub(crate) fn record(input_hz: f64, seed: u64, idler_damage: bool, load: Option<&str>) -> Value {
     let chans: serde_json::Map<String, Value> = channels(input_hz, seed, idler_damage)
         .into_iter()
         .map(|(n, x)| (n.to_string(), json!(x)))
@@ -171,7 +175,7 @@ fn assert_state(a: &Value, hz: f64, load: &str) {
     assert_eq!(names, ["a1", "a2"], "the tachometer is not diagnosed");
 }
 
-async fn wait_ready(app: &TestApp, id: &str) {
+pub(crate) async fn wait_ready(app: &TestApp, id: &str) {
     let t0 = Instant::now();
     loop {
         let g = get(

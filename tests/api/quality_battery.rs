@@ -1,4 +1,4 @@
-//! The record-quality battery (issue 32): corrupted variants of a REAL record — the first
+//! The record-quality battery: corrupted variants of a REAL record — the first
 //! 32 768 samples of SpectraQuest `h30hz0`, channel `a1` (`tests/data/`, 12.9 kHz, motor
 //! 30 Hz; MIT-licensed source, `shared/data/spectraquest-gfd/README.md`) — through the HTTP
 //! service (both stores) and through `gearwear diagnose`: spikes of several sizes, clipping,

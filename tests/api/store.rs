@@ -19,6 +19,7 @@ both_stores!(
     a_gearbox_put_again_is_unchanged_and_a_new_description_requeues,
     baseline_marks_touch_only_the_machine_s_records,
     a_database_from_before_the_tachometer_keeps_working,
+    stored_features_from_before_their_version_read_as_version_one,
 );
 
 fn gearbox(id: &str, hash: &str) -> GearboxRow {
@@ -30,7 +31,7 @@ fn gearbox(id: &str, hash: &str) -> GearboxRow {
         description: "{}".into(),
         hash: hash.into(),
         builtin: false,
-        status: "queued".into(),
+        status: gearwear::signature::TableStatus::Queued,
         progress: 0.0,
         error: None,
         claimed_by: None,
@@ -138,7 +139,7 @@ async fn a_gearbox_put_again_is_unchanged_and_a_new_description_requeues(b: Back
         .unwrap();
     assert_eq!(
         st.get_gearbox("gb2").await.unwrap().unwrap().status,
-        "failed"
+        gearwear::signature::TableStatus::Failed
     );
     assert_eq!(
         st.put_gearbox(&gearbox("gb2", "h1")).await.unwrap(),
@@ -286,7 +287,7 @@ pub fn ingest(machine: &str, idem: Option<&str>, t: i64) -> Ingest {
             ea_estimate: 0.5,
             ea_lower: 0.4,
             ea_upper: 0.6,
-            alert_level: "ok".into(),
+            alert_level: gearwear::assessment::Level::Ok,
             motion_state: "period-1".into(),
             body: "{}".into(),
             spectrum: "null".into(),
@@ -395,7 +396,7 @@ async fn concurrent_records_share_commits_and_are_each_stored_once(b: Backend) {
     st.close().await;
 }
 
-/// A database migrated before 0004 (issue 31) opens with the new columns' defaults, and its
+/// A database migrated before 0004 opens with the new columns' defaults, and its
 /// diagnoses stored with a withheld wear figure (`ea_*` written as exactly 0, `has_wear` 1)
 /// stop reading as a wear of 0; a real wear figure is left as it was.
 async fn a_database_from_before_the_tachometer_keeps_working(b: Backend) {
@@ -423,5 +424,34 @@ async fn a_database_from_before_the_tachometer_keeps_working(b: Backend) {
     let wear: Vec<(&str, bool)> = ds.iter().map(|d| (d.id.as_str(), d.has_wear)).collect();
     assert_eq!(wear, [("withheld", false), ("worn", true)]);
     assert!(store::wear_json(&ds[0]).is_null());
+    st.close().await;
+}
+
+/// Baseline records stored before the features' layout carried its version (migration 0010)
+/// read as the core's `StoredFeatures`, version 1, with their novelty features whole.
+async fn stored_features_from_before_their_version_read_as_version_one(b: Backend) {
+    let Some(db) = TestDb::new(b).await else {
+        return;
+    };
+    let features = r#"{"gearbox_id":"wang2019","gearbox_hash":"h1","f1_hz":500.0,"omega1":1.0,"lines":[],"channels":{"a1":{"novelty_features":{"values":{"rms":1.5},"indicators":null},"alert_level":"ok"}}}"#;
+    let insert = format!(
+        "INSERT INTO records (id, machine_id, received_at, content_type, sample_rate_hz, \
+         sample_count, sha256, features, baseline) \
+         VALUES ('r1', 'old', 1, 'text/csv', 20000, 1, '00', '{features}', 1)"
+    );
+    let rows = [
+        "INSERT INTO machines (id, created_at, updated_at) VALUES ('old', 1, 1)",
+        insert.as_str(),
+    ];
+    db.migrated_to(9, &rows).await;
+    let st = store::connect(&db.url).await.unwrap();
+    let recs = st.baseline_records("old").await.unwrap();
+    assert_eq!(recs.len(), 1);
+    let f: gearwear::assessment::StoredFeatures = serde_json::from_str(&recs[0].features).unwrap();
+    assert_eq!(f.version, 1);
+    assert_eq!(f.gearbox_hash, "h1");
+    assert_eq!(f.channels["a1"].novelty_features.values["rms"], 1.5);
+    let raw: serde_json::Value = serde_json::from_str(&recs[0].features).unwrap();
+    assert_eq!(raw["version"], 1, "the version is written into the row");
     st.close().await;
 }

@@ -1,4 +1,4 @@
-//! Trends and measurement time (issue 33 items 0 and 1), on both stores: a machine whose wear
+//! Trends and measurement time, on both stores: a machine whose wear
 //! rises over twelve days of `recorded_at` has a significant trend and a projected alarm; the
 //! same records back-filled in another order give the same series and the same trend; the
 //! machine view's `trend_summary` and the webhook payload's are the wear trend; bad queries are refused naming the

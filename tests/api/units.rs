@@ -1,4 +1,4 @@
-//! Physical units through the API (issue 33), on both stores: a machine whose channel is
+//! Physical units through the API, on both stores: a machine whose channel is
 //! declared in volts with an accelerometer's sensitivity and an ISO 20816-3 class answers a
 //! synthetic record with the analytic acceleration, velocity and zone (and `gearwear diagnose`
 //! with the same flags prints the same figures); units that cannot be converted are refused

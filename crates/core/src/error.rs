@@ -101,7 +101,7 @@ pub enum Error {
     /// values, more spikes than can be repaired): what, where and why
     /// ([`crate::record::quality`]).
     #[error("{}", .0.message)]
-    RecordQuality(Box<crate::record::finding::QualityFinding>),
+    RecordQuality(Box<crate::quality_finding::QualityFinding>),
     /// A record sample is NaN or ±∞.
     #[error("sample {index} of the record is {value}; the record must contain only finite numbers")]
     NonFiniteSample { index: usize, value: f64 },

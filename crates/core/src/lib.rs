@@ -37,13 +37,16 @@ pub mod condition;
 pub mod diagnosis;
 pub mod error;
 pub mod gearbox;
+pub mod machine;
 pub mod model;
 pub mod novelty;
+pub mod quality_finding;
 pub mod record;
 pub mod signal;
 pub mod signature;
 pub mod solver;
 pub mod trend;
 pub mod units;
+pub mod words;
 
 pub use error::{Error, Result};

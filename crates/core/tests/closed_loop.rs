@@ -127,9 +127,8 @@ fn the_seeded_scores_keep_the_clean_and_eccentric_answers() {
     }
 }
 
-/// A low-pass mode at 1.6 f1 (the issue's own example) is named **at its frequency**. Until
-/// session 12 this test checked the name only, and passed with the mode fitted at 0.85 f1.
-/// Measured in session 12 over seeds 2000–2011 of this case, with the old and the new grid
+/// A low-pass mode at 1.6 f1 is named **at its frequency** (checking the name only would pass
+/// with the mode fitted at 0.85 f1). Measured over seeds 2000–2011 of this case, with either grid
 /// interpolation alike: the mode is named at 1.6 f1 on 1 of 12 seeds (2010, where the table's
 /// wear is right, 0.305). On the others the table reads ea ≈ 0.10 for 0.30, and the
 /// record's period-3 lines (0.33, 0.67 f1), which the plain model from its own initial state

@@ -7,6 +7,7 @@
 //! index allows at most one episode per machine that is not closed.
 
 use async_trait::async_trait;
+use gearwear_core::assessment::Level;
 use gearwear_core::assessment::episodes::EpisodePolicy;
 use serde_json::{Value, json};
 
@@ -29,7 +30,7 @@ pub struct AlertRow {
     pub id: String,
     pub machine_id: String,
     /// `warning` or `alarm`.
-    pub level: String,
+    pub level: Level,
     /// `open`, `acknowledged` or `closed`.
     pub state: String,
     pub opened_at: i64,
@@ -56,7 +57,7 @@ pub struct AlertEventRow {
     pub by: Option<String>,
     pub note: Option<String>,
     pub record_id: Option<String>,
-    pub level: Option<String>,
+    pub level: Option<Level>,
     pub severity: Option<f64>,
 }
 
@@ -78,6 +79,12 @@ pub enum Acknowledged {
     Unknown,
     /// Already acknowledged or closed: the episode as it is.
     Refused(AlertRow),
+}
+
+/// A level as stored (a column written from [`Level::as_str`]).
+pub fn stored_level(text: String) -> StoreResult<Level> {
+    text.parse()
+        .map_err(|e: gearwear_core::words::UnknownWord| crate::StoreError::Decode(e.to_string()))
 }
 
 /// The API's JSON of an episode (without its audit trail).
@@ -150,7 +157,13 @@ pub fn transition_events(
         let mut p = Value::Object(m.clone());
         p["event"] = "wear.threshold_crossed".into();
         p["event_id"] = format!("{event_id}-crossed").into();
-        p["previous_alert_level"] = if event == "opened" { "ok" } else { "warning" }.into();
+        p["previous_alert_level"] = if event == "opened" {
+            Level::Ok
+        } else {
+            Level::Warning
+        }
+        .as_str()
+        .into();
         p["alert_id"] = a.id.clone().into();
         out.push(("wear.threshold_crossed".to_string(), p.to_string()));
     }
@@ -183,9 +196,8 @@ pub trait AlertStore: Send + Sync {
 /// The SQL of [`AlertStore`] and of the ingest's step for one backend (see `ingest_sql!`).
 macro_rules! alerts_sql {
     ($store:ident, $db:ty) => {
-        use gearwear_core::assessment::episodes::{
-            ALARM, OpenEpisode, Tracker, Transition, WARNING, step,
-        };
+        use gearwear_core::assessment::Level;
+        use gearwear_core::assessment::episodes::{OpenEpisode, Tracker, Transition, step};
         use sqlx::Row;
         use $crate::alerts::*;
         use $crate::*;
@@ -196,7 +208,7 @@ macro_rules! alerts_sql {
             Ok(AlertRow {
                 id: r.try_get("id")?,
                 machine_id: r.try_get("machine_id")?,
-                level: r.try_get("level")?,
+                level: stored_level(r.try_get("level")?)?,
                 state: r.try_get("state")?,
                 opened_at: r.try_get("opened_at")?,
                 record_id: r.try_get("record_id")?,
@@ -224,7 +236,7 @@ macro_rules! alerts_sql {
             .bind(&e.by)
             .bind(&e.note)
             .bind(&e.record_id)
-            .bind(&e.level)
+            .bind(e.level.map(Level::as_str))
             .bind(e.severity)
             .execute(&mut **tx)
             .await?;
@@ -278,7 +290,7 @@ macro_rules! alerts_sql {
                     None => 0.0,
                 },
                 open: open.as_ref().map(|a| OpenEpisode {
-                    level: if a.level == ALARM { ALARM } else { WARNING },
+                    level: a.level,
                     peak_severity: a.peak_severity,
                 }),
             };
@@ -299,14 +311,14 @@ macro_rules! alerts_sql {
             .bind(after.run_peak)
             .execute(&mut **tx)
             .await?;
-            let audit = |alert_id: &str, event: &str, level: Option<&str>| AlertEventRow {
+            let audit = |alert_id: &str, event: &str, level: Option<Level>| AlertEventRow {
                 alert_id: alert_id.to_string(),
                 at: input.measured_at,
                 event: event.to_string(),
                 by: None,
                 note: None,
                 record_id: Some(record_id.to_string()),
-                level: level.map(str::to_string),
+                level,
                 severity: input.severity,
             };
             let row = match (&transition, open, &after.open) {
@@ -314,7 +326,7 @@ macro_rules! alerts_sql {
                     let a = AlertRow {
                         id: new_id(),
                         machine_id: machine_id.to_string(),
-                        level: level.to_string(),
+                        level: *level,
                         state: "open".into(),
                         opened_at: input.measured_at,
                         record_id: record_id.to_string(),
@@ -332,7 +344,7 @@ macro_rules! alerts_sql {
                     )
                     .bind(&a.id)
                     .bind(&a.machine_id)
-                    .bind(&a.level)
+                    .bind(a.level.as_str())
                     .bind(&a.state)
                     .bind(a.opened_at)
                     .bind(&a.record_id)
@@ -347,7 +359,7 @@ macro_rules! alerts_sql {
                             e.into()
                         }
                     })?;
-                    insert_event(tx, &audit(&a.id, "opened", Some(level))).await?;
+                    insert_event(tx, &audit(&a.id, "opened", Some(*level))).await?;
                     Some((a, "opened"))
                 }
                 (Some(Transition::Closed), Some(mut a), _) => {
@@ -372,11 +384,11 @@ macro_rules! alerts_sql {
                         "UPDATE alerts SET level = $2, peak_severity = $3 WHERE id = $1",
                     )
                     .bind(&a.id)
-                    .bind(o.level)
+                    .bind(o.level.as_str())
                     .bind(o.peak_severity)
                     .execute(&mut **tx)
                     .await?;
-                    a.level = o.level.to_string();
+                    a.level = o.level;
                     a.peak_severity = o.peak_severity;
                     if matches!(t, Some(Transition::Escalated { .. })) {
                         insert_event(tx, &audit(&a.id, "escalated", Some(o.level))).await?;
@@ -447,7 +459,10 @@ macro_rules! alerts_sql {
                         by: r.try_get("by_key")?,
                         note: r.try_get("note")?,
                         record_id: r.try_get("record_id")?,
-                        level: r.try_get("level")?,
+                        level: r
+                            .try_get::<Option<String>, _>("level")?
+                            .map(stored_level)
+                            .transpose()?,
                         severity: r.try_get("severity")?,
                     })
                 })
@@ -491,7 +506,7 @@ macro_rules! alerts_sql {
                         by: Some(by.to_string()),
                         note: Some(note.to_string()),
                         record_id: None,
-                        level: Some(a.level.clone()),
+                        level: Some(a.level),
                         severity: None,
                     },
                 )

@@ -47,6 +47,20 @@ macro_rules! baselines_sql {
         use sqlx::Row;
         use $crate::*;
 
+        /// Raise the machine's `baseline_version` (its baseline changed in this transaction).
+        async fn bump_version(
+            tx: &mut sqlx::Transaction<'_, $db>,
+            machine_id: &str,
+        ) -> StoreResult<()> {
+            sqlx::query(
+                "UPDATE machines SET baseline_version = baseline_version + 1 WHERE id = $1",
+            )
+            .bind(machine_id)
+            .execute(&mut **tx)
+            .await?;
+            Ok(())
+        }
+
         #[async_trait::async_trait]
         impl $crate::BaselineStore for $store {
             async fn set_baseline(
@@ -71,18 +85,26 @@ macro_rules! baselines_sql {
                     .await?;
                     n += r.rows_affected();
                 }
+                if n > 0 {
+                    bump_version(&mut tx, machine_id).await?;
+                }
                 tx.commit().await?;
                 Ok(n)
             }
 
             async fn clear_baseline(&self, machine_id: &str) -> StoreResult<u64> {
+                let mut tx = self.pool.begin().await?;
                 let r = sqlx::query(
                     "UPDATE records SET baseline = 0, baseline_at = NULL \
                      WHERE machine_id = $1 AND baseline = 1",
                 )
                 .bind(machine_id)
-                .execute(&self.pool)
+                .execute(&mut *tx)
                 .await?;
+                if r.rows_affected() > 0 {
+                    bump_version(&mut tx, machine_id).await?;
+                }
+                tx.commit().await?;
                 Ok(r.rows_affected())
             }
 

@@ -4,13 +4,6 @@ use async_trait::async_trait;
 
 use super::StoreResult;
 
-/// Alert levels in increasing severity.
-pub const LEVELS: [&str; 4] = ["unknown", "ok", "warning", "alarm"];
-
-pub fn level_rank(level: &str) -> usize {
-    LEVELS.iter().position(|l| *l == level).unwrap_or(0)
-}
-
 /// A diagnosis; `body`/`spectrum` are JSON texts, empty in summaries.
 #[derive(Debug, Clone)]
 pub struct DiagnosisRow {
@@ -22,7 +15,7 @@ pub struct DiagnosisRow {
     pub ea_estimate: f64,
     pub ea_lower: f64,
     pub ea_upper: f64,
-    pub alert_level: String,
+    pub alert_level: gearwear_core::assessment::Level,
     pub motion_state: String,
     pub body: String,
     pub spectrum: String,
@@ -125,7 +118,7 @@ macro_rules! diagnoses_sql {
                 ea_estimate: r.try_get("ea_estimate")?,
                 ea_lower: r.try_get("ea_lower")?,
                 ea_upper: r.try_get("ea_upper")?,
-                alert_level: r.try_get("alert_level")?,
+                alert_level: $crate::alerts::stored_level(r.try_get("alert_level")?)?,
                 motion_state: r.try_get("motion_state")?,
                 body: if full || body {
                     r.try_get("body")?

@@ -1,6 +1,7 @@
 //! Gearbox descriptions and their signature-table jobs (claimed by one replica at a time).
 
 use async_trait::async_trait;
+pub use gearwear_core::signature::TableStatus;
 
 use super::StoreResult;
 
@@ -19,7 +20,7 @@ pub struct GearboxRow {
     /// The paper's rig: its table is the served signatures file.
     pub builtin: bool,
     /// `queued`, `running`, `ready`, `failed`.
-    pub status: String,
+    pub status: TableStatus,
     /// 0–1 while running.
     pub progress: f64,
     pub error: Option<String>,
@@ -96,6 +97,7 @@ macro_rules! gearboxes_sql {
     ($store:ident, $db:ty) => {
         use super::$store;
         use sqlx::Row;
+        use $crate::gearboxes::TableStatus;
         use $crate::*;
 
         const GEARBOX_COLS: &str = "id, name, source, source_format, description, hash, builtin, \
@@ -111,7 +113,12 @@ macro_rules! gearboxes_sql {
                 description: r.try_get("description")?,
                 hash: r.try_get("hash")?,
                 builtin: r.try_get::<i64, _>("builtin")? != 0,
-                status: r.try_get("status")?,
+                status: r
+                    .try_get::<String, _>("status")?
+                    .parse()
+                    .map_err(|e: gearwear_core::words::UnknownWord| {
+                        StoreError::Decode(e.to_string())
+                    })?,
                 progress: r.try_get("progress")?,
                 error: r.try_get("error")?,
                 claimed_by: r.try_get("claimed_by")?,
@@ -323,8 +330,8 @@ macro_rules! gearboxes_sql {
                 now: i64,
             ) -> StoreResult<bool> {
                 let (status, table, error, progress) = match result {
-                    Ok(t) => ("ready", Some(t), None, 1.0),
-                    Err(e) => ("failed", None, Some(e), 0.0),
+                    Ok(t) => (TableStatus::Ready, Some(t), None, 1.0),
+                    Err(e) => (TableStatus::Failed, None, Some(e), 0.0),
                 };
                 let r = sqlx::query(
                     "UPDATE gearboxes SET status = $4, signature_table = $5, error = $6, \
@@ -334,7 +341,7 @@ macro_rules! gearboxes_sql {
                 .bind(id)
                 .bind(hash)
                 .bind(worker)
-                .bind(status)
+                .bind(status.as_str())
                 .bind(table)
                 .bind(error)
                 .bind(progress)

@@ -190,7 +190,7 @@ macro_rules! ingest_sql {
             .bind(d.ea_estimate)
             .bind(d.ea_lower)
             .bind(d.ea_upper)
-            .bind(&d.alert_level)
+            .bind(d.alert_level.as_str())
             .bind(&d.motion_state)
             .bind(&d.body)
             .bind(&d.spectrum)
@@ -203,12 +203,14 @@ macro_rules! ingest_sql {
             .await?;
             sqlx::query(
                 "UPDATE machines SET updated_at = $2, record_count = record_count + 1, \
-                 last_diagnosis_id = $3, alert_level = $4 WHERE id = $1",
+                 last_diagnosis_id = $3, alert_level = $4, \
+                 baseline_version = baseline_version + $5 WHERE id = $1",
             )
             .bind(&rec.machine_id)
             .bind(rec.received_at)
             .bind(&d.id)
-            .bind(&d.alert_level)
+            .bind(d.alert_level.as_str())
+            .bind(rec.baseline as i64)
             .execute(&mut **tx)
             .await?;
             let event_id = new_id();

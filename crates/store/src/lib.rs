@@ -99,7 +99,7 @@ pub use alerts::{
 };
 pub use baselines::{BaselineRecord, BaselineStore};
 pub use calibration::{CalibrationRow, CalibrationStore};
-pub use diagnoses::{DiagnosisRow, DiagnosisStore, LEVELS, level_rank, novelty_json, wear_json};
+pub use diagnoses::{DiagnosisRow, DiagnosisStore, novelty_json, wear_json};
 pub use gearboxes::{GearboxRow, GearboxStore, PutOutcome};
 pub use ingest::{IdemRow, Ingest, IngestStore, NewRecord, diagnosis_payload, ingest_events};
 pub use keys::{KeyRow, KeyStore};
@@ -128,6 +128,9 @@ pub enum StoreError {
     /// [`Ingest::registered_only`]: nothing of it is stored.
     #[error("machine `{0}` is not registered")]
     UnregisteredMachine(String),
+    /// A stored value that does not read back as its type (a row written by another program).
+    #[error("stored value unreadable: {0}")]
+    Decode(String),
 }
 
 impl StoreError {

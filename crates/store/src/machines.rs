@@ -12,7 +12,10 @@ pub struct MachineRow {
     pub updated_at: i64,
     pub record_count: i64,
     pub last_diagnosis_id: Option<String>,
-    pub alert_level: String,
+    pub alert_level: gearwear_core::assessment::Level,
+    /// Raised with every change of its baseline records (migration 0009): fitted baselines
+    /// are kept by this number.
+    pub baseline_version: i64,
     /// Its gearbox (`gearboxes.id`); `None`: the paper's rig.
     pub gearbox_id: Option<String>,
     /// Nominal input-shaft rate (Hz), a hint for finding the mesh lines.
@@ -62,7 +65,7 @@ pub struct MachineDeletion {
     /// Stored `Idempotency-Key` answers about its records.
     pub idempotency_answers: u64,
     /// Its alert level before the deletion (`None`: it had only a calibration).
-    pub alert_level: Option<String>,
+    pub alert_level: Option<gearwear_core::assessment::Level>,
 }
 
 /// The payload of the `machine.deleted` webhook event: what was deleted, when.
@@ -114,7 +117,8 @@ macro_rules! machines_sql {
                 updated_at: r.try_get("updated_at")?,
                 record_count: r.try_get("record_count")?,
                 last_diagnosis_id: r.try_get("last_diagnosis_id")?,
-                alert_level: r.try_get("alert_level")?,
+                alert_level: $crate::alerts::stored_level(r.try_get("alert_level")?)?,
+                baseline_version: r.try_get("baseline_version")?,
                 gearbox_id: r.try_get("gearbox_id")?,
                 input_shaft_hz: r.try_get("input_shaft_hz")?,
                 channels: r
@@ -206,14 +210,14 @@ macro_rules! machines_sql {
                 // and on PostgreSQL a record being stored for the machine (which locks the
                 // same row first) either commits before (its rows are deleted here) or waits
                 // and then finds no machine.
-                let alert_level: Option<String> = sqlx::query(
+                let alert_level = sqlx::query(
                     "UPDATE machines SET updated_at = $2 WHERE id = $1 RETURNING alert_level",
                 )
                 .bind(id)
                 .bind(now)
                 .fetch_optional(&mut *tx)
                 .await?
-                .map(|r| r.try_get("alert_level"))
+                .map(|r| $crate::alerts::stored_level(r.try_get("alert_level")?))
                 .transpose()?;
                 let deleted = |table_where: &'static str| {
                     let q = sqlx::AssertSqlSafe(format!("DELETE FROM {table_where}"));

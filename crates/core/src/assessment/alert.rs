@@ -25,6 +25,7 @@
 use serde::Serialize;
 
 use super::ChannelAssessment;
+pub use super::level::{Basis, Level};
 use crate::novelty::Novelty;
 
 /// Wear-degree thresholds (ea, units of the backlash b) that set a machine's alert level:
@@ -46,13 +47,13 @@ impl Default for Thresholds {
 }
 
 impl Thresholds {
-    pub fn level(&self, ea: f64) -> &'static str {
+    pub fn level(&self, ea: f64) -> Level {
         if ea >= self.alarm {
-            "alarm"
+            Level::Alarm
         } else if ea >= self.warning {
-            "warning"
+            Level::Warning
         } else {
-            "ok"
+            Level::Ok
         }
     }
 }
@@ -60,22 +61,11 @@ impl Thresholds {
 /// A channel's (or a record's) alert.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct Alert {
-    /// `ok`, `warning`, `alarm` or `unknown`.
-    pub level: &'static str,
-    /// `wear`, `novelty`, `wear+novelty`, `baseline` or `none`: what the level rests on.
-    pub basis: &'static str,
+    pub level: Level,
+    /// What the level rests on.
+    pub basis: Basis,
     /// One sentence a person can act on.
     pub reason: String,
-}
-
-/// Severity order for choosing the deciding channel.
-pub fn severity(level: &str) -> usize {
-    match level {
-        "alarm" => 3,
-        "warning" => 2,
-        "unknown" => 1,
-        _ => 0,
-    }
 }
 
 /// The alert of one channel.
@@ -90,10 +80,10 @@ pub fn alert(
     declared_healthy: bool,
 ) -> Alert {
     let wear_level = wear.filter(|w| !w.1).map(|w| th.level(w.0));
-    if declared_healthy && wear_level.is_none_or(|w| w == "ok") {
+    if declared_healthy && wear_level.is_none_or(|w| w == Level::Ok) {
         return Alert {
-            level: "ok",
-            basis: "baseline",
+            level: Level::Ok,
+            basis: Basis::Baseline,
             reason: match novelty {
                 Some(n) => format!(
                     "posted as healthy (baseline record); its novelty against the earlier \
@@ -112,11 +102,11 @@ pub fn alert(
     }
     let nov_level = novelty.map(|n| {
         if !n.anomalous {
-            "ok"
+            Level::Ok
         } else if n.score >= 2.0 * n.threshold {
-            "alarm"
+            Level::Alarm
         } else {
-            "warning"
+            Level::Warning
         }
     });
     let fit_note = match (wear, table_note) {
@@ -128,8 +118,8 @@ pub fn alert(
     };
     match (wear_level, nov_level) {
         (None, None) => Alert {
-            level: "unknown",
-            basis: "none",
+            level: Level::Unknown,
+            basis: Basis::None,
             reason: format!(
                 "{}{}and the machine has no baseline: add a baseline (POST at least 3 healthy \
                  records with ?baseline=true) or describe the gearbox (PUT /v1/gearboxes/{{id}}, \
@@ -144,7 +134,7 @@ pub fn alert(
         },
         (Some(w), None) => Alert {
             level: w,
-            basis: "wear",
+            basis: Basis::Wear,
             reason: format!(
                 "wear degree {:.2} ({w}); no baseline yet for novelty",
                 wear.map(|w| w.0).unwrap_or(f64::NAN)
@@ -154,7 +144,7 @@ pub fn alert(
             let nv = novelty.expect("novelty level implies novelty");
             Alert {
                 level: n,
-                basis: "novelty",
+                basis: Basis::Novelty,
                 reason: format!(
                     "novelty {:.2} against the machine's baseline (threshold {:.2}){}{}",
                     nv.score,
@@ -166,10 +156,9 @@ pub fn alert(
         }
         (Some(w), Some(n)) => {
             let nv = novelty.expect("novelty level implies novelty");
-            let level = if severity(n) > severity(w) { n } else { w };
             Alert {
-                level,
-                basis: "wear+novelty",
+                level: n.max(w),
+                basis: Basis::WearAndNovelty,
                 reason: format!(
                     "wear degree {:.2} ({w}); novelty {:.2} against the machine's baseline \
                      (threshold {:.2}, {n})",
@@ -193,7 +182,7 @@ pub fn deciding(results: &[ChannelAssessment]) -> usize {
     let mut best = 0;
     for (i, r) in results.iter().enumerate().skip(1) {
         let b = &results[best];
-        let (s, sb) = (severity(r.alert.level), severity(b.alert.level));
+        let (s, sb) = (r.alert.level, b.alert.level);
         if s > sb || (s == sb && ratio(r) > ratio(b)) {
             best = i;
         }
@@ -228,10 +217,10 @@ mod tests {
     #[test]
     fn a_record_nothing_vouches_for_is_unknown_not_ok() {
         let a = alert(Some((0.2, true, 40.0)), None, &TH, None, false);
-        assert_eq!(a.level, "unknown");
+        assert_eq!(a.level, Level::Unknown);
         assert!(a.reason.contains("baseline"), "{}", a.reason);
         let a = alert(None, None, &TH, Some("the table is not ready"), false);
-        assert_eq!(a.level, "unknown");
+        assert_eq!(a.level, Level::Unknown);
         assert!(
             a.reason.starts_with("the table is not ready"),
             "{}",
@@ -242,12 +231,12 @@ mod tests {
     #[test]
     fn a_record_posted_as_healthy_raises_no_alert_of_its_own() {
         let a = alert(Some((0.2, true, 40.0)), Some(&nov(9.0)), &TH, None, true);
-        assert_eq!((a.level, a.basis), ("ok", "baseline"));
+        assert_eq!((a.level, a.basis), (Level::Ok, Basis::Baseline));
         assert!(a.reason.contains("unlike"), "{}", a.reason);
         // A wear degree the model vouches for still counts.
         assert_eq!(
             alert(Some((0.9, false, 1.0)), None, &TH, None, true).level,
-            "alarm"
+            Level::Alarm
         );
     }
 
@@ -255,13 +244,13 @@ mod tests {
     fn a_poor_fit_defers_to_the_baseline() {
         assert_eq!(
             alert(Some((0.9, true, 40.0)), Some(&nov(1.0)), &TH, None, false).level,
-            "ok"
+            Level::Ok
         );
         let a = alert(Some((0.1, true, 40.0)), Some(&nov(4.0)), &TH, None, false);
-        assert_eq!((a.level, a.basis), ("warning", "novelty"));
+        assert_eq!((a.level, a.basis), (Level::Warning, Basis::Novelty));
         assert_eq!(
             alert(None, Some(&nov(6.5)), &TH, None, false).level,
-            "alarm"
+            Level::Alarm
         );
     }
 
@@ -269,25 +258,25 @@ mod tests {
     fn a_good_fit_and_a_baseline_take_the_more_severe() {
         assert_eq!(
             alert(Some((0.9, false, 1.0)), Some(&nov(1.0)), &TH, None, false).level,
-            "alarm"
+            Level::Alarm
         );
         assert_eq!(
             alert(Some((0.1, false, 1.0)), Some(&nov(4.0)), &TH, None, false).level,
-            "warning"
+            Level::Warning
         );
         assert_eq!(
             alert(Some((0.6, false, 1.0)), None, &TH, None, false).level,
-            "warning"
+            Level::Warning
         );
         assert_eq!(
             alert(Some((0.1, false, 1.0)), None, &TH, None, false).level,
-            "ok"
+            Level::Ok
         );
     }
 
     #[test]
     fn the_most_severe_channel_decides() {
-        let ch = |name: &str, level: &'static str, score: f64| ChannelAssessment {
+        let ch = |name: &str, level: Level, score: f64| ChannelAssessment {
             name: name.into(),
             reading: None,
             features: RecordFeatures {
@@ -300,19 +289,19 @@ mod tests {
             findings: Vec::new(),
             alert: Alert {
                 level,
-                basis: "novelty",
+                basis: Basis::Novelty,
                 reason: String::new(),
             },
             wear_um: None,
             vibration: None,
         };
         let v = vec![
-            ch("a1", "ok", 1.0),
-            ch("a2", "warning", 3.5),
-            ch("a3", "warning", 5.0),
+            ch("a1", Level::Ok, 1.0),
+            ch("a2", Level::Warning, 3.5),
+            ch("a3", Level::Warning, 5.0),
         ];
         assert_eq!(deciding(&v), 2);
-        let v = vec![ch("a1", "unknown", 0.0), ch("a2", "ok", 2.0)];
+        let v = vec![ch("a1", Level::Unknown, 0.0), ch("a2", Level::Ok, 2.0)];
         assert_eq!(deciding(&v), 0);
     }
 }

@@ -2,8 +2,6 @@
 //! measured operating state (once per record), each channel's order-domain evidence, its
 //! score against the machine's state-aware baseline and the findings.
 
-use std::collections::BTreeMap;
-
 use serde::Serialize;
 
 use super::{Machine, RecordFacts};
@@ -11,7 +9,7 @@ use crate::condition::{
     EVIDENCE_VERSION, Finding, OperatingState, Parts, StateBaseline, StateRecord, StateScore,
     Tacho, evidence, findings, measure,
 };
-use crate::novelty::{FeatureZ, MachineBaseline, Novelty, OrderAnalysis, RecordFeatures};
+use crate::novelty::{FeatureZ, Novelty, OrderAnalysis, RecordFeatures};
 use crate::record::Record;
 use crate::signal::order::ShaftAngle;
 use crate::signal::tsa::order_analysis_at;
@@ -242,30 +240,4 @@ pub fn state_baseline(features: &[RecordFeatures]) -> Option<Result<StateBaselin
         })
         .collect();
     (recs.len() >= crate::condition::baseline::MIN_STATE_RECORDS).then(|| StateBaseline::fit(recs))
-}
-
-/// A machine's fitted baselines by channel: the pooled ones, the state-aware ones (where the
-/// records carry states) and the number of baseline records.
-pub type Baselines = (
-    BTreeMap<String, MachineBaseline>,
-    BTreeMap<String, StateBaseline>,
-    BTreeMap<String, usize>,
-);
-
-/// A machine's baselines from its baseline records' features by channel: the pooled one and,
-/// where the records carry states, the state-aware one; with the records per channel.
-///
-/// Errors: a channel with fewer records than a baseline needs.
-pub fn fit_baselines(by_channel: &BTreeMap<String, Vec<RecordFeatures>>) -> Result<Baselines> {
-    let mut pooled = BTreeMap::new();
-    let mut states = BTreeMap::new();
-    let mut counts = BTreeMap::new();
-    for (name, feats) in by_channel {
-        pooled.insert(name.clone(), MachineBaseline::fit(feats)?);
-        if let Some(b) = state_baseline(feats) {
-            states.insert(name.clone(), b?);
-        }
-        counts.insert(name.clone(), feats.len());
-    }
-    Ok((pooled, states, counts))
 }

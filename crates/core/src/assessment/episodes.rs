@@ -57,16 +57,18 @@ impl Default for EpisodePolicy {
     }
 }
 
+use super::{Basis, Level};
+
 /// Level of an open episode.
-pub const WARNING: &str = "warning";
+pub const WARNING: Level = Level::Warning;
 /// Level of an open episode.
-pub const ALARM: &str = "alarm";
+pub const ALARM: Level = Level::Alarm;
 
 /// An open (or acknowledged) episode as the state machine sees it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct OpenEpisode {
     /// `warning` or `alarm`.
-    pub level: &'static str,
+    pub level: Level,
     /// Highest severity of a record since the run that opened it began.
     pub peak_severity: f64,
 }
@@ -90,9 +92,9 @@ pub struct Tracker {
 #[derive(Debug, Clone, PartialEq)]
 pub enum Transition {
     /// A new episode at this level.
-    Opened { level: &'static str },
+    Opened { level: Level },
     /// The open episode went from `warning` to `alarm`.
-    Escalated { level: &'static str },
+    Escalated { level: Level },
     /// The open episode ended.
     Closed,
 }
@@ -109,7 +111,7 @@ impl Transition {
 }
 
 /// The level of an episode that opens: `alarm` when its run was all at alarm, else `warning`.
-fn level_of(alarm_run_complete: bool) -> &'static str {
+fn level_of(alarm_run_complete: bool) -> Level {
     if alarm_run_complete { ALARM } else { WARNING }
 }
 
@@ -163,12 +165,12 @@ pub fn step(
 
 /// The band of severities a level allows: `ok` `[0, 1)`, `warning` `[1, 2)`, `alarm`
 /// `[2, ∞)`; `None` for `unknown`.
-fn band(level: &str) -> Option<(f64, f64)> {
+fn band(level: Level) -> Option<(f64, f64)> {
     match level {
-        "ok" => Some((0.0, 1.0 - 1e-9)),
-        "warning" => Some((1.0, 2.0 - 1e-9)),
-        "alarm" => Some((2.0, f64::INFINITY)),
-        _ => None,
+        Level::Ok => Some((0.0, 1.0 - 1e-9)),
+        Level::Warning => Some((1.0, 2.0 - 1e-9)),
+        Level::Alarm => Some((2.0, f64::INFINITY)),
+        Level::Unknown => None,
     }
 }
 
@@ -208,10 +210,12 @@ pub fn channel_severity(c: &ChannelAssessment, th: &Thresholds) -> Option<f64> {
         .map(|w| wear_severity(w.0, th));
     let novelty = c.novelty.as_ref().map(novelty_severity);
     let raw = match c.alert.basis {
-        "wear" => wear.unwrap_or(lo),
-        "novelty" => novelty.unwrap_or(lo),
-        "baseline" => wear.unwrap_or(0.0),
-        _ => wear.into_iter().chain(novelty).fold(lo, f64::max),
+        Basis::Wear => wear.unwrap_or(lo),
+        Basis::Novelty => novelty.unwrap_or(lo),
+        Basis::Baseline => wear.unwrap_or(0.0),
+        Basis::WearAndNovelty | Basis::Quality | Basis::None => {
+            wear.into_iter().chain(novelty).fold(lo, f64::max)
+        }
     };
     Some(raw.clamp(lo, hi))
 }
@@ -296,7 +300,7 @@ mod tests {
         assert_eq!(t.open.unwrap().peak_severity, 1.9);
     }
 
-    /// Issue 33's target: a machine alternating around a threshold for 200 records opens at
+    /// The target: a machine alternating around a threshold for 200 records opens at
     /// most one alert, whatever the amplitude of the alternation and the delays.
     #[test]
     fn alternating_around_a_threshold_opens_at_most_one_alert() {

@@ -22,25 +22,29 @@
 //! ([`crate::condition`]), with findings, instead of against the pooled baseline.
 
 pub mod alert;
+pub mod baselines;
 pub mod condition;
 pub mod diagnoser;
 pub mod episodes;
+pub mod level;
 pub mod quality;
 pub mod rate;
+pub mod stored;
 
 use std::collections::BTreeMap;
 
 use serde::Serialize;
 use serde_json::Value;
 
-pub use alert::{Alert, Thresholds, alert, deciding, severity};
-pub use condition::{
-    Baselines, Measured, StateJudgement, TachoChannel, fit_baselines, state_baseline,
-};
+pub use alert::{Alert, Thresholds, alert, deciding};
+pub use baselines::Baselines;
+pub use condition::{Measured, StateJudgement, TachoChannel, state_baseline};
 pub use diagnoser::{
     CalibrationUse, MachineCalibration, PathCorrection, TableDiagnoser, TableReading, WearInterval,
 };
+pub use level::{Basis, Level};
 pub use quality::Quality;
+pub use stored::{STORED_FEATURES_VERSION, StoredChannel, StoredFeatures};
 
 use crate::condition::{Finding, Load, OperatingState, StateBaseline};
 use crate::diagnosis::{Diagnosis, Fit, WearDegree};
@@ -103,8 +107,7 @@ pub struct GearboxRef {
     pub name: String,
     /// The description's hash.
     pub hash: String,
-    /// `queued`, `running`, `ready` or `failed`.
-    pub table_status: String,
+    pub table_status: crate::signature::TableStatus,
     /// 0–1.
     pub table_progress: f64,
 }
@@ -144,7 +147,7 @@ pub struct NoTable {
 #[derive(Debug, Clone, Serialize)]
 pub struct ChannelSummary {
     pub name: String,
-    pub alert_level: &'static str,
+    pub alert_level: Level,
     pub alert: Alert,
     pub wear_degree: Option<WearDegree>,
     /// `wear_degree` in µm, when it is shown.
@@ -260,7 +263,7 @@ impl Assessment {
     }
 
     /// The record's alert level.
-    pub fn level(&self) -> &'static str {
+    pub fn level(&self) -> Level {
         self.alert.level
     }
 
@@ -394,8 +397,8 @@ fn assess_channel(
     );
     if let Some(missing) = uncovered.filter(|_| !facts.declared_healthy) {
         alert = Alert {
-            level: "unknown",
-            basis: "baseline",
+            level: Level::Unknown,
+            basis: Basis::Baseline,
             reason: format!("this record's operating state is not covered: {missing}"),
         };
     }

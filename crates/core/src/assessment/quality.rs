@@ -58,7 +58,7 @@ pub fn inspect_channels(
             .units
             .channels
             .of(name)
-            .map(|(_, unit)| plausible_limit(unit));
+            .map(|(_, unit)| plausible_limit(unit.quantity, unit.to_si));
         let ins = match inspect(x, fs, limit) {
             Ok(ins) => ins,
             Err(e) if several => {
@@ -169,12 +169,12 @@ pub fn rate_refusal(mut f: QualityFinding, e: &crate::Error) -> crate::Error {
 /// The alert a capped record gets instead of `alert` (unchanged when it is `unknown`
 /// already).
 pub fn capped(alert: &Alert, why: &str) -> Alert {
-    if alert.level == "unknown" {
+    if alert.level == super::Level::Unknown {
         return alert.clone();
     }
     Alert {
-        level: "unknown",
-        basis: "quality",
+        level: super::Level::Unknown,
+        basis: super::Basis::Quality,
         reason: format!(
             "{why}; the record would have been `{}` ({}), but that cannot be trusted — check \
              the sensor and send a clean record",

@@ -35,9 +35,9 @@ const SM_ORDERS: [f64; 3] = [1.0, 2.0, 3.0];
 
 /// Lines of the plain model (peaks 6 dB above its noise floor) a path resonance must move by
 /// more than 3 dB relative to f1 to be eligible (otherwise the candidate says so in
-/// [`Candidate::refused`](super::Candidate::refused)). It was 3 until session 14; replaying
-/// the selection over the stored candidates of seeds 22–27 at 2 named six more true path
-/// resonances (two of them visible) and claimed one path on a planetary-wear record.
+/// [`Candidate::refused`](super::Candidate::refused)). Replaying the selection over the stored
+/// candidates of seeds 22–27, 2 named six more true path resonances than 3 (two of them
+/// visible) and claimed one path on a planetary-wear record.
 pub const MIN_COLOURED_LINES: usize = 2;
 
 /// How a path resonance's improvement lies over its own half-power band
@@ -164,9 +164,9 @@ impl Fingerprints {
             }
             SHAFT_MODULATION => {
                 // Orders ± 1 to ± 3: the mesh's nonlinear response to a strong modulation
-                // carries it to the higher sideband orders (± 1 only until session 14; the
-                // selection replayed over seeds 22–27 named three more modulations with the
-                // three orders, and let one speed wander through).
+                // carries it to the higher sideband orders (the selection replayed over seeds
+                // 22–27 named three more modulations with three orders than with ± 1 alone,
+                // and let one speed wander through).
                 let sb: Vec<f64> = self
                     .line_peaks
                     .iter()

@@ -126,7 +126,7 @@ pub(super) fn refit(
 /// enters through simulations of a fitted effect whose size is itself uncertain, and its
 /// refits moved good table estimates either way by less than their interval (tuning seed 6 of
 /// `benches/closed_loop.rs`, 66 records: wear error after ≤ before on 54 taking every refit, 56
-/// taking the profile's vertex as session 8 did, 60 with this rule; fresh seeds in
+/// taking the profile's vertex, 60 with this rule; fresh seeds in
 /// `docs/closed-loop.md` § Session 9). The refit is still reported (`wear_refit`).
 pub(super) fn confirm_or_move(
     before: &WearEstimate,

@@ -21,14 +21,14 @@ use super::sidebands::SidebandCheck;
 pub const SM_SIDEBAND_PROMINENCE_DB: f64 = 6.0;
 /// … and it beats "no effect" by this many claim margins. A strong modulation changes the
 /// chaotic model's whole response, not only its ± 1-order sidebands (seed 22 of the benchmark,
-/// record 13: ΔBIC −285, share 0.09, the input shaft's sidebands at its rate 6.4 dB up). Set in
-/// session 14 by replaying the selection over the stored candidates of seeds 22–27
+/// record 13: ΔBIC −285, share 0.09, the input shaft's sidebands at its rate 6.4 dB up). Set by
+/// replaying the selection over the stored candidates of seeds 22–27
 /// (`scripts/closed_loop_replay.py`): two more modulations named, no other answer changed.
 pub const SM_SIDEBAND_MARGIN_FACTOR: f64 = 2.0;
 
 /// A path resonance alone that its band supports (below [`SUPPORT_SHARE`] on the lines, or
 /// colouring fewer than [`MIN_COLOURED_LINES`](super::MIN_COLOURED_LINES)) must beat "no
-/// effect" by this many claim margins. Set in session 15 by replaying the selection over the
+/// effect" by this many claim margins. Set by replaying the selection over the
 /// band figures of seeds 32–35 (`scripts/closed_loop_replay.py`): at 1 and at 2 the same
 /// answers changed.
 pub const BAND_MARGIN_FACTOR: f64 = 2.0;
@@ -38,8 +38,8 @@ pub const BAND_MARGIN_FACTOR: f64 = 2.0;
 /// (all of it for a gear of many teeth), so the attribution check hardly tests it, and two
 /// variants (one per gear) are tried. First set to 1.5 on seeds 4 and 5 of the benchmark (1.0:
 /// speed wander and noise bursts claimed as tooth damage; 2.0 and more: fewer true ones
-/// named), when a line-skirt artefact of the grid spectrum (fixed in session 12) gave the
-/// 100-tooth gear's sidebands something to fit on every record. Re-set in session 13 from the
+/// named), when a line-skirt artefact of the grid spectrum (since fixed) gave the
+/// 100-tooth gear's sidebands something to fit on every record. Re-set from the
 /// stored candidates of seeds 14–21 (528 records; the selection replayed at each factor
 /// reproduces every answer at 1.5): 2.5 names one visible effect fewer (103 of 122 against
 /// 104) and makes 2 fewer false claims on library records (9 against 11); on seeds 22–23 it

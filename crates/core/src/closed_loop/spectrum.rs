@@ -8,7 +8,7 @@
 //! `r_j = BAND_LO + j / GRID_PERIODS`, `j = 0, 1, …` while `r_j ≤ BAND_HI`
 //!
 //! (`r = f / f1`), by linear interpolation of the amplitude `A` between the two neighbouring
-//! bins, then `20 log10`. (Until session 12 the interpolation was of `20 log10 A`: a grid point
+//! bins, then `20 log10`. (Interpolating `20 log10 A` instead would be wrong: a grid point
 //! 0.4 bin past a bin-centred line's last non-zero bin then took 40 % of the nearly empty next
 //! bin's dB value (the grid point read −184 dB in the test below), so a simulated line — exactly on a bin, nothing in the bins beyond ±1 — ended
 //! one grid point early while a measured one, never exactly on a bin and with noise around it,

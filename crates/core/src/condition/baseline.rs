@@ -179,8 +179,24 @@ fn reference(cands: &[&StateRecord], f: f64, any_distance: bool) -> Option<Refer
 }
 
 impl StateBaseline {
-    /// Fit from healthy records with their states (at least [`MIN_STATE_RECORDS`]).
-    pub fn fit(records: Vec<StateRecord>) -> Result<StateBaseline> {
+    /// Fit from healthy records with their states (at least [`MIN_STATE_RECORDS`]), in any
+    /// order: they are put in one (load, speed, values) so that the same records give the same
+    /// baseline to the last bit, however a store returns them.
+    pub fn fit(mut records: Vec<StateRecord>) -> Result<StateBaseline> {
+        records.sort_by(|a, b| {
+            let load = |r: &StateRecord| r.state.load.as_ref().map(|l| l.to_string());
+            load(a)
+                .cmp(&load(b))
+                .then(a.state.shaft_hz.total_cmp(&b.state.shaft_hz))
+                .then_with(|| {
+                    a.values
+                        .values()
+                        .zip(b.values.values())
+                        .map(|(x, y)| x.total_cmp(y))
+                        .find(|o| o.is_ne())
+                        .unwrap_or(std::cmp::Ordering::Equal)
+                })
+        });
         if records.len() < MIN_STATE_RECORDS {
             return Err(Error::Signal(format!(
                 "a state-aware baseline needs at least {MIN_STATE_RECORDS} healthy records with \

@@ -19,7 +19,6 @@
 mod channels;
 mod checks;
 mod csv;
-pub mod finding;
 mod gzip;
 pub mod quality;
 mod raw_f32;

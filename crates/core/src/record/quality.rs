@@ -18,10 +18,9 @@
 //! | dropout | a run of at least [`DROPOUT_MIN_RUN`] samples of one exact value | refused |
 //! | DC step | the means before and after one sample differ by more than [`DC_STEP_SIGMAS`] σ_r and [`DC_STEP_NOISE`] standard errors (both sides at least 10 % of the record) | refused |
 
-pub use super::finding::QualityFinding;
 use crate::error::{Error, Result};
+pub use crate::quality_finding::QualityFinding;
 use crate::signal::velocity::Kinematic;
-use crate::units::ChannelUnit;
 
 /// A sample beyond this many robust σ from the median is an outlier (real records: ≤ 15).
 pub const SPIKE_SIGMAS: f64 = 25.0;
@@ -84,14 +83,15 @@ impl Inspection {
     }
 }
 
-/// The largest plausible magnitude of a sample in `unit` (in the channel's own unit):
-/// [`MAX_ACCELERATION_SI`] or [`MAX_VELOCITY_SI`] over the unit's factor to SI.
-pub fn plausible_limit(unit: &ChannelUnit) -> f64 {
-    let si = match unit.quantity {
+/// The largest plausible magnitude of a sample of a channel measuring `quantity` whose unit is
+/// `to_si` SI units (in the channel's own unit): [`MAX_ACCELERATION_SI`] or
+/// [`MAX_VELOCITY_SI`] over `to_si`.
+pub fn plausible_limit(quantity: Kinematic, to_si: f64) -> f64 {
+    let si = match quantity {
         Kinematic::Acceleration => MAX_ACCELERATION_SI,
         Kinematic::Velocity => MAX_VELOCITY_SI,
     };
-    (si / unit.to_si).min(ABSURD_MAGNITUDE)
+    (si / to_si).min(ABSURD_MAGNITUDE)
 }
 
 /// Where a finding is: `samples a–b (t0–t1 s)`.

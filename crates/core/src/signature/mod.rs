@@ -25,6 +25,7 @@
 
 pub mod line_set;
 pub mod precompute;
+pub mod status;
 pub mod table;
 
 use std::f64::consts::TAU;
@@ -33,6 +34,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::signal::lines::LineMeasurement;
 
+pub use status::TableStatus;
 pub use table::{SignatureTable, SimulationSettings, model_hash};
 
 /// What the simulated "sensor" measures.

@@ -1,4 +1,4 @@
-//! Trends and time to threshold (issue 33 item 1): a machine's series over measurement time —
+//! Trends and time to threshold: a machine's series over measurement time —
 //! its wear degree, novelty score or a finding's strength — fitted with a straight line robust
 //! to outliers, and the time until the line crosses the warning and alarm thresholds.
 //!

@@ -59,7 +59,7 @@ fn each_unit_converts_to_si_by_its_factor() {
     assert!((c.to_si - 0.05).abs() < 1e-15 && c.quantity == Kinematic::Velocity);
 }
 
-/// The target of issue 33 in every unit: the velocity RMS of a sine recorded in that unit
+/// The target in every unit: the velocity RMS of a sine recorded in that unit
 /// within 2 % of the analytic value at 10, 100 and 1000 Hz (0.01 % at 100 and 1000 Hz), and
 /// the acceleration's RMS and peak in m/s² and in g.
 #[test]

@@ -20,7 +20,7 @@ fn rel(measured: f64, truth: f64) -> f64 {
     measured / truth - 1.0
 }
 
-/// The target of issue 33: velocity RMS within 2 % of the analytic value for sines at 10,
+/// The target: velocity RMS within 2 % of the analytic value for sines at 10,
 /// 100 and 1000 Hz, from an acceleration record and from a velocity record; tighter where it
 /// holds (0.01 % at 100 and 1000 Hz; at 10 Hz the window's main lobe reaches into the band's
 /// lower transition). `cargo test --release -p gearwear-core --lib velocity_rms_is -- --nocapture`

@@ -1,6 +1,6 @@
-//! One defect a record's inspection found ([`super::quality`]). A leaf of its own: the crate's
-//! [`Error::RecordQuality`](crate::Error::RecordQuality) carries it, and the inspection returns
-//! that error, so neither can hold the other's definition without a circle.
+//! One defect a record's inspection found ([`crate::record::quality`]). A leaf of its own,
+//! below both users: the crate's [`Error::RecordQuality`](crate::Error::RecordQuality) carries
+//! it, and the inspection returns that error.
 
 use serde::Serialize;
 
