@@ -174,7 +174,7 @@ fn a_disagreement_is_caught() {
     let cli = json!({"alert": {"level": "ok"}, "wear_degree": {"estimate": 0.5}});
     assert_same_assessment(&service, &cli);
     for other in [
-        json!({"alert": {"level": "ok"}, "wear_degree": {"estimate": 0.500000000001}}),
+        json!({"alert": {"level": "ok"}, "wear_degree": {"estimate": 0.5000001}}),
         json!({"alert": {"level": "warning"}, "wear_degree": {"estimate": 0.5}}),
         json!({"alert": {"level": "ok"}, "wear_degree": {"estimate": 0.5}, "novelty": null}),
         json!({"alert": {"level": "ok"}}),
