@@ -400,3 +400,37 @@ fn precompute_is_deterministic_and_resumes_from_its_partial_file() {
     assert_eq!(back.entries.len(), 2);
     back.check_model(&Gearbox::paper_rig()).unwrap();
 }
+
+/// A shaft rate at the table's edge, or within half a grid step outside it, is read at the
+/// edge's column; one beyond half a step is refused with the band named.
+#[test]
+fn a_record_at_the_tables_edge_is_read() {
+    let t = table();
+    let gb = t.gearbox();
+    let f_ref = gb.reference_frequency_hz();
+    let o = &t.grid.omega1;
+    let (lo, step) = (o[0], o[1] - o[0]);
+    // The input-shaft rate whose f1 sits at Ω1 = `om`.
+    let shaft_at = |om: f64| om * f_ref / gb.f1_hz(1.0);
+    for (om, read) in [
+        (lo, true),
+        (lo * (1.0 - 1e-7), true),
+        (lo - 0.4 * step, true),
+        (lo - 0.7 * step, false),
+    ] {
+        let rec = synthetic(om * f_ref, 25_600.0, 2.0, 1.0);
+        let opts = DiagnoseOptions {
+            shaft_hz: Some(shaft_at(om)),
+            ..Default::default()
+        };
+        let r = diagnose(&rec, t, &opts);
+        if read {
+            assert!(r.is_ok(), "Ω1 = {om}: {:?}", r.err());
+        } else {
+            assert!(
+                matches!(r, Err(Error::SpeedOutOfBand { .. })),
+                "Ω1 = {om}: {r:?}"
+            );
+        }
+    }
+}

@@ -28,7 +28,7 @@ pub mod diagnoser;
 pub mod episodes;
 pub mod level;
 pub mod quality;
-pub mod rate;
+pub mod setup;
 pub mod stored;
 
 use std::collections::BTreeMap;
@@ -238,6 +238,8 @@ pub struct Assessment {
     pub alert: Alert,
     /// What the record-quality checks found and repaired ([`quality`]).
     pub quality: Quality,
+    /// The declared input-shaft rate against the measured one and the lines ([`setup`]).
+    pub setup: setup::Setup,
     /// Each chosen channel, analysed (in the order chosen).
     #[serde(skip)]
     pub assessed: Vec<ChannelAssessment>,
@@ -290,11 +292,26 @@ pub fn assess(
     stage: &mut dyn FnMut(&'static str),
 ) -> crate::Result<Assessment> {
     let mut quality = quality::inspect_channels(channels, chosen, facts.sample_rate_hz, machine)?;
-    let mismatch = quality::check_rate(channels, chosen, facts, machine, &mut quality);
-    assess_inspected(channels, chosen, facts, machine, quality, stage).map_err(|e| match mismatch {
+    let measured = condition::measure_record(channels, chosen, facts, machine)?;
+    let setup = setup::check(channels, chosen, facts, machine, &measured);
+    let doubt = setup::add_to_quality(&setup, channels, chosen, facts.sample_rate_hz, &mut quality);
+    let inspected = Inspected {
+        quality,
+        measured,
+        setup,
+    };
+    assess_inspected(channels, chosen, facts, machine, inspected, stage).map_err(|e| match doubt {
         Some(f) if quality::rate_explains(&e) => quality::rate_refusal(f, &e),
         _ => e,
     })
+}
+
+/// What the steps before the channels' assessment found: the record's quality, its measured
+/// state and its set-up.
+struct Inspected {
+    quality: Quality,
+    measured: Measured,
+    setup: setup::Setup,
 }
 
 /// [`assess`] after the quality step.
@@ -303,10 +320,14 @@ fn assess_inspected(
     chosen: &[usize],
     facts: &RecordFacts,
     machine: &Machine,
-    quality: Quality,
+    inspected: Inspected,
     stage: &mut dyn FnMut(&'static str),
 ) -> crate::Result<Assessment> {
-    let measured = condition::measure_record(channels, chosen, facts, machine)?;
+    let Inspected {
+        quality,
+        measured,
+        setup,
+    } = inspected;
     let mut assessed = Vec::with_capacity(chosen.len());
     for &i in chosen {
         let name = channels[i].0.clone();
@@ -323,11 +344,11 @@ fn assess_inspected(
             .as_deref()
             .filter(|_| !facts.declared_healthy)
         {
-            a.alert = quality::capped(&a.alert, why);
+            a.alert = quality::capped(&a.alert, why, quality.setup_doubt);
         }
         assessed.push(a);
     }
-    Ok(assemble(assessed, facts, machine, measured, quality))
+    Ok(assemble(assessed, facts, machine, measured, quality, setup))
 }
 
 /// The features of a record's chosen channels exactly as its assessment computes them — what
@@ -524,6 +545,7 @@ fn assemble(
     machine: &Machine,
     measured: Measured,
     quality: Quality,
+    setup: setup::Setup,
 ) -> Assessment {
     let di = deciding(&assessed);
     let decide = &assessed[di];
@@ -574,6 +596,7 @@ fn assemble(
         indicators: decide.features.indicators.clone(),
         alert: decide.alert.clone(),
         quality,
+        setup,
         deciding: di,
         assessed,
     }

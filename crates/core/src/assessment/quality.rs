@@ -15,8 +15,7 @@
 
 use serde::Serialize;
 
-use super::rate::check_rate as rate_of;
-use super::{Alert, Machine, RecordFacts};
+use super::{Alert, Machine};
 use crate::record::quality::{
     QualityFinding, REPAIR_KEEPS_ALERT_FRACTION, inspect, plausible_limit,
 };
@@ -35,6 +34,10 @@ pub struct Quality {
     /// Why the alert is capped (when it is).
     #[serde(skip)]
     pub cap_reason: Option<String>,
+    /// The cap is a set-up in doubt ([`super::setup`]): it replaces even an `unknown` alert's
+    /// reason (an uncovered state's advice to add a healthy record does not apply).
+    #[serde(skip)]
+    pub setup_doubt: bool,
 }
 
 /// Inspect the chosen channels (`(name, samples)`; sample rate `fs`, Hz), repairing the
@@ -107,44 +110,6 @@ pub fn inspect_channels(
     Ok(q)
 }
 
-/// The sample-rate check ([`super::rate`]) on the first chosen channel, for a machine with a
-/// described gearbox and a shaft rate from outside the record (`facts.shaft_hz`, else the
-/// machine's nominal one): a mismatch is added to `q` as a `warned` finding (the alert capped)
-/// and returned, to become the refusal when the diagnosis then fails
-/// ([`rate_refusal`]).
-pub fn check_rate(
-    channels: &[(String, Vec<f64>)],
-    chosen: &[usize],
-    facts: &RecordFacts,
-    machine: &Machine,
-    q: &mut Quality,
-) -> Option<QualityFinding> {
-    if !machine.described {
-        return None;
-    }
-    let shaft_hz = facts.shaft_hz.or(machine.input_shaft_hz)?;
-    let (name, x) = &channels[*chosen.first()?];
-    let m = rate_of(x, facts.sample_rate_hz, machine.gearbox, shaft_hz)?;
-    let fs = facts.sample_rate_hz;
-    let f = QualityFinding {
-        defect: "sample-rate",
-        channel: (channels.len() > 1).then(|| name.clone()),
-        first_sample: 0,
-        last_sample: x.len() - 1,
-        start_s: 0.0,
-        end_s: x.len() as f64 / fs,
-        action: "warned",
-        message: m.message(),
-    };
-    if q.status == "clean" {
-        q.status = "warned";
-    }
-    q.alert_capped = true;
-    q.cap_reason = Some(m.message());
-    q.findings.push(f.clone());
-    Some(f)
-}
-
 /// Whether a mis-declared sample rate explains the diagnosis's failure `e` (no mesh line, a
 /// speed outside the table, a rate too low for the lines, a record too short in periods).
 pub fn rate_explains(e: &crate::Error) -> bool {
@@ -158,8 +123,8 @@ pub fn rate_explains(e: &crate::Error) -> bool {
     )
 }
 
-/// The refusal of a record whose diagnosis failed (`e`) where the sample-rate check found the
-/// lines at another factor (`f`).
+/// The refusal of a record whose diagnosis failed (`e`) where the set-up check found it in
+/// doubt (`f`).
 pub fn rate_refusal(mut f: QualityFinding, e: &crate::Error) -> crate::Error {
     f.action = "refused";
     f.message = format!("{} (the diagnosis failed: {e})", f.message);
@@ -167,8 +132,19 @@ pub fn rate_refusal(mut f: QualityFinding, e: &crate::Error) -> crate::Error {
 }
 
 /// The alert a capped record gets instead of `alert` (unchanged when it is `unknown`
-/// already).
-pub fn capped(alert: &Alert, why: &str) -> Alert {
+/// already, unless the set-up is in doubt: `setup_doubt`).
+pub fn capped(alert: &Alert, why: &str, setup_doubt: bool) -> Alert {
+    if setup_doubt {
+        return Alert {
+            level: super::Level::Unknown,
+            basis: super::Basis::Quality,
+            reason: format!(
+                "{why}; the record is not judged until its set-up is corrected (it would have \
+                 been `{}`: {})",
+                alert.level, alert.reason
+            ),
+        };
+    }
     if alert.level == super::Level::Unknown {
         return alert.clone();
     }

@@ -287,21 +287,7 @@ fn mesh_lines(map: &LineMap, reference: &BTreeMap<String, f64>) -> Vec<Candidate
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gearbox::Gearbox;
-
-    fn spur() -> Parts {
-        Parts::of(
-            &Gearbox::parse(
-                "format = \"gearwear-gearbox\"\nversion = 1\nname = \"s\"\ninput_shaft = \"in\"\n\
-                 [[stage]]\nkind = \"parallel\"\npinion = { shaft = \"in\", teeth = 32 }\n\
-                 gear = { shaft = \"idler\", teeth = 96 }\n\
-                 [[stage]]\nkind = \"parallel\"\npinion = { shaft = \"idler\", teeth = 48 }\n\
-                 gear = { shaft = \"out\", teeth = 80 }\n",
-                "test",
-            )
-            .unwrap(),
-        )
-    }
+    use crate::condition::test_util::spur;
 
     /// The 48T idler pinion (stage 2, mesh order 16) with local damage: its comb around 16
     /// falls two thirds in the idler's own lines and one third in the shared ones (every third

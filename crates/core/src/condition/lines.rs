@@ -457,21 +457,7 @@ fn regions(meshes: &[f64]) -> Vec<Region> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gearbox::Gearbox;
-
-    fn spur() -> Parts {
-        Parts::of(
-            &Gearbox::parse(
-                "format = \"gearwear-gearbox\"\nversion = 1\nname = \"s\"\ninput_shaft = \"in\"\n\
-                 [[stage]]\nkind = \"parallel\"\npinion = { shaft = \"in\", teeth = 32 }\n\
-                 gear = { shaft = \"idler\", teeth = 96 }\n\
-                 [[stage]]\nkind = \"parallel\"\npinion = { shaft = \"idler\", teeth = 48 }\n\
-                 gear = { shaft = \"out\", teeth = 80 }\n",
-                "test",
-            )
-            .unwrap(),
-        )
-    }
+    use crate::condition::test_util::spur;
 
     #[test]
     fn fractions_of_tooth_counts() {

@@ -20,8 +20,11 @@ pub mod explain;
 pub mod findings;
 pub mod lines;
 pub mod parts;
+pub mod setup;
 pub mod state;
 pub mod synchronous;
+#[cfg(test)]
+mod test_util;
 
 pub use baseline::{Coverage, StateBaseline, StateRecord, StateScore};
 pub use evidence::{EVIDENCE_VERSION, Evidence, evidence};

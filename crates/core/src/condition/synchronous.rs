@@ -73,24 +73,31 @@ pub fn synchronous_rate(
     hint_hz: f64,
     search: f64,
 ) -> Result<f64> {
-    let x = &x[..x.len().min(MAX_SAMPLES)];
-    let spec = amplitude_spectrum(x, fs, Window::Hann)?;
-    let df = spec.resolution();
-    let p = prominence(&spec.amplitude);
+    LineProminence::of(x, fs)?.rate(map, hint_hz, search)
+}
+
+/// A record's lines: every bin's prominence ([`prominence`]) and the spectrum's resolution.
+#[derive(Debug, Clone)]
+pub struct LineProminence {
+    p: Vec<f64>,
+    /// Bin spacing, Hz.
+    df: f64,
+    /// Sample rate, Hz.
+    fs: f64,
+}
+
+/// The grid's orders (ascending) up to `o_max` with their weights ([`MESH_WEIGHT`] for a mesh
+/// line, else 1); `None` when the shafts' rates are not commensurate or the map has no mesh.
+pub fn grid_orders(map: &LineMap, o_max_meshes: f64) -> Option<Vec<(f64, f64)>> {
     let top_mesh = map.meshes.iter().fold(0.0f64, |a, &b| a.max(b));
     let (Some(period), true) = (map.period_revs, top_mesh > 0.0) else {
-        return Err(Error::Signal(
-            "the shafts' rates are not commensurate: the rate cannot be found from the lines \
-             they make; give a tachometer channel"
-                .into(),
-        ));
+        return None;
     };
-    let (lo, hi) = (hint_hz * (1.0 - search), hint_hz * (1.0 + search));
-    let grid = |o_max: f64| -> Vec<(f64, f64)> {
-        let layout = super::lines::Layout {
-            revolutions: 2 * period as usize,
-            periods: Some(2),
-        };
+    let layout = super::lines::Layout {
+        revolutions: 2 * period as usize,
+        periods: Some(2),
+    };
+    Some(
         map.lines(&layout, true)
             .into_iter()
             .map(|(bin, class)| {
@@ -101,68 +108,127 @@ pub fn synchronous_rate(
                 };
                 (bin as f64 / layout.revolutions as f64, w)
             })
-            .filter(|(o, _)| *o <= o_max && o * hi < 0.45 * fs)
-            .collect()
-    };
-    let score = |orders: &[(f64, f64)], f: f64| -> f64 {
-        orders
-            .iter()
-            .map(|(o, w)| {
-                let k = (o * f / df).round() as usize;
-                w * p.get(k).copied().unwrap_or(0.0)
-            })
-            .sum()
-    };
-    let coarse = grid(1.5 * top_mesh);
-    if coarse.is_empty() {
-        return Err(Error::Signal(format!(
-            "no line of this gearbox lies under 0.45 × the sample rate ({:.0} Hz) near \
-             {hint_hz:.2} Hz: the rate cannot be found without a tachometer",
-            0.45 * fs
-        )));
-    }
-    let top = coarse.iter().fold(0.0f64, |a, b| a.max(b.0));
-    let step = 0.5 * df / top;
-    let n = ((hi - lo) / step).ceil() as usize;
-    let mut scored: Vec<(f64, f64)> = (0..=n)
-        .map(|i| lo + i as f64 * step)
-        .map(|f| (f, score(&coarse, f)))
-        .collect();
-    scored.sort_by(|a, b| b.1.total_cmp(&a.1));
-    let fine = grid(3.0 * top_mesh);
-    let top = fine.iter().fold(0.0f64, |a, b| a.max(b.0));
-    let fine_step = 0.25 * df / top;
-    let mut candidates: Vec<f64> = scored
-        .iter()
-        .take(5)
-        .flat_map(|&(f0, _)| {
-            let k = (step / fine_step).ceil() as i64;
-            (-k..=k).map(move |i| f0 + i as f64 * fine_step)
+            .filter(|(o, _)| *o <= o_max_meshes * top_mesh)
+            .collect(),
+    )
+}
+
+impl LineProminence {
+    /// The prominence of `x`'s lines (the first [`MAX_SAMPLES`] samples; rate `fs`, Hz).
+    ///
+    /// Errors: the spectrum's (bad samples or rate).
+    pub fn of(x: &[f64], fs: f64) -> Result<LineProminence> {
+        let x = &x[..x.len().min(MAX_SAMPLES)];
+        let spec = amplitude_spectrum(x, fs, Window::Hann)?;
+        Ok(LineProminence {
+            df: spec.resolution(),
+            p: prominence(&spec.amplitude),
+            fs,
         })
-        .filter(|f| (lo..=hi).contains(f))
-        .collect();
-    candidates.sort_by(f64::total_cmp);
-    candidates.dedup_by(|a, b| (*a - *b).abs() < 0.5 * fine_step);
-    let fine_scored: Vec<(f64, f64)> = candidates.iter().map(|&f| (f, score(&fine, f))).collect();
-    let best = fine_scored.iter().fold(f64::MIN, |a, b| a.max(b.1));
-    // The score is flat while every line stays on its bin: the middle of the best plateau.
-    let plateau: Vec<f64> = fine_scored
-        .iter()
-        .filter(|(_, s)| *s >= best - 1e-9)
-        .map(|(f, _)| *f)
-        .collect();
-    Ok(if plateau.is_empty() {
-        hint_hz
-    } else {
-        plateau.iter().sum::<f64>() / plateau.len() as f64
-    })
+    }
+
+    /// The prominence at the bin of `f` (Hz; 0 outside the spectrum).
+    pub fn at(&self, f: f64) -> f64 {
+        let k = (f / self.df).round();
+        if k < 0.0 {
+            return 0.0;
+        }
+        self.p.get(k as usize).copied().unwrap_or(0.0)
+    }
+
+    /// Bin spacing, Hz.
+    pub fn resolution(&self) -> f64 {
+        self.df
+    }
+
+    /// Highest frequency read (0.45 × the sample rate), Hz.
+    pub fn top_hz(&self) -> f64 {
+        0.45 * self.fs
+    }
+
+    /// Weighted mean prominence of the grid lines `orders` (from [`grid_orders`]) at the
+    /// input-shaft rate `rate_hz`, over those under [`Self::top_hz`]; `None` when none is.
+    pub fn grid_mean(&self, orders: &[(f64, f64)], rate_hz: f64) -> Option<f64> {
+        let (mut s, mut w) = (0.0, 0.0);
+        for (o, wt) in orders.iter().filter(|(o, _)| o * rate_hz < self.top_hz()) {
+            s += wt * self.at(o * rate_hz);
+            w += wt;
+        }
+        (w > 0.0).then(|| s / w)
+    }
+
+    /// [`synchronous_rate`] on these lines.
+    ///
+    /// Errors: no grid (rates not commensurate) or no grid line under 0.45 × the sample rate.
+    pub fn rate(&self, map: &LineMap, hint_hz: f64, search: f64) -> Result<f64> {
+        let df = self.df;
+        let (lo, hi) = (hint_hz * (1.0 - search), hint_hz * (1.0 + search));
+        let grid = |o_max: f64| -> Result<Vec<(f64, f64)>> {
+            let g = grid_orders(map, o_max).ok_or_else(|| {
+                Error::Signal(
+                    "the shafts' rates are not commensurate: the rate cannot be found from the \
+                     lines they make; give a tachometer channel"
+                        .into(),
+                )
+            })?;
+            Ok(g.into_iter()
+                .filter(|(o, _)| o * hi < self.top_hz())
+                .collect())
+        };
+        let score = |orders: &[(f64, f64)], f: f64| -> f64 {
+            orders.iter().map(|(o, w)| w * self.at(o * f)).sum()
+        };
+        let coarse = grid(1.5)?;
+        if coarse.is_empty() {
+            return Err(Error::Signal(format!(
+                "no line of this gearbox lies under 0.45 × the sample rate ({:.0} Hz) near \
+                 {hint_hz:.2} Hz: the rate cannot be found without a tachometer",
+                self.top_hz()
+            )));
+        }
+        let top = coarse.iter().fold(0.0f64, |a, b| a.max(b.0));
+        let step = 0.5 * df / top;
+        let n = ((hi - lo) / step).ceil() as usize;
+        let mut scored: Vec<(f64, f64)> = (0..=n)
+            .map(|i| lo + i as f64 * step)
+            .map(|f| (f, score(&coarse, f)))
+            .collect();
+        scored.sort_by(|a, b| b.1.total_cmp(&a.1));
+        let fine = grid(3.0)?;
+        let top = fine.iter().fold(0.0f64, |a, b| a.max(b.0));
+        let fine_step = 0.25 * df / top;
+        let mut candidates: Vec<f64> = scored
+            .iter()
+            .take(5)
+            .flat_map(|&(f0, _)| {
+                let k = (step / fine_step).ceil() as i64;
+                (-k..=k).map(move |i| f0 + i as f64 * fine_step)
+            })
+            .filter(|f| (lo..=hi).contains(f))
+            .collect();
+        candidates.sort_by(f64::total_cmp);
+        candidates.dedup_by(|a, b| (*a - *b).abs() < 0.5 * fine_step);
+        let fine_scored: Vec<(f64, f64)> =
+            candidates.iter().map(|&f| (f, score(&fine, f))).collect();
+        let best = fine_scored.iter().fold(f64::MIN, |a, b| a.max(b.1));
+        // The score is flat while every line stays on its bin: the middle of the best plateau.
+        let plateau: Vec<f64> = fine_scored
+            .iter()
+            .filter(|(_, s)| *s >= best - 1e-9)
+            .map(|(f, _)| *f)
+            .collect();
+        Ok(if plateau.is_empty() {
+            hint_hz
+        } else {
+            plateau.iter().sum::<f64>() / plateau.len() as f64
+        })
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::condition::parts::Parts;
-    use crate::gearbox::Gearbox;
+    use crate::condition::test_util::spur;
     use std::f64::consts::TAU;
 
     /// A spur train record at 29.91 Hz: mesh lines, sidebands at the idler's and the output's
@@ -171,16 +237,7 @@ mod tests {
     /// at the highest order read; the phase of a mesh line refines it).
     #[test]
     fn the_rate_where_every_shafts_lines_line_up() {
-        let gb = Gearbox::parse(
-            "format = \"gearwear-gearbox\"\nversion = 1\nname = \"s\"\ninput_shaft = \"in\"\n\
-             [[stage]]\nkind = \"parallel\"\npinion = { shaft = \"in\", teeth = 32 }\n\
-             gear = { shaft = \"idler\", teeth = 96 }\n\
-             [[stage]]\nkind = \"parallel\"\npinion = { shaft = \"idler\", teeth = 48 }\n\
-             gear = { shaft = \"out\", teeth = 80 }\n",
-            "test",
-        )
-        .unwrap();
-        let map = LineMap::of(&Parts::of(&gb));
+        let map = LineMap::of(&spur());
         let (fs, f) = (20_000.0, 29.91);
         let n = 80_000;
         let mut seed = 7u64;

@@ -139,6 +139,20 @@ impl<'a> Inputs<'a> {
         omega1 < self.omega_band.0 - tol || omega1 > self.omega_band.1 + tol
     }
 
+    /// True when `omega1` is more than half a grid step outside the table's Ω1 band (a
+    /// one-column table: [`BAND_EDGE_TOLERANCE`]): a record that close to an edge is read at
+    /// the edge's column (the matcher clamps), whose lines differ from its own by less than
+    /// from the next column's.
+    fn beyond_half_step(&self, omega1: f64) -> bool {
+        let o = &self.table.grid.omega1;
+        let (lo, hi) = match o.len() {
+            0 | 1 => (self.edge(), self.edge()),
+            n => (0.5 * (o[1] - o[0]), 0.5 * (o[n - 1] - o[n - 2])),
+        };
+        omega1 < self.omega_band.0 - lo.max(self.edge())
+            || omega1 > self.omega_band.1 + hi.max(self.edge())
+    }
+
     fn out_of_band(&self, f1: f64, omega1: f64) -> Error {
         Error::SpeedOutOfBand {
             f1_hz: f1,
@@ -170,7 +184,7 @@ impl<'a> Inputs<'a> {
                 }
                 let f1 = self.gb.f1_hz(s);
                 let om = f1 / self.f_ref;
-                if self.outside_band(om, 1e-9) {
+                if self.beyond_half_step(om) {
                     return Err(self.out_of_band(f1, om));
                 }
                 if self.rate_too_low_for(f1) {
@@ -207,7 +221,7 @@ impl<'a> Inputs<'a> {
         let (f1, detection) = locate_f1(x, fs, &spectrum, &partners(self.gb), search, nominal)?;
         let omega1 = f1 / self.f_ref;
         // Refinement may move a peak found at the band edge a hair outside it.
-        if self.outside_band(omega1, self.edge()) {
+        if self.beyond_half_step(omega1) {
             return Err(self.out_of_band(f1, omega1));
         }
         self.check_length(f1)?;
