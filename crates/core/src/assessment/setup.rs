@@ -128,3 +128,51 @@ pub fn add_to_quality(
     q.findings.push(f.clone());
     Some(f)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The check's reading is flattened into the object: every key once.
+    #[test]
+    fn the_setup_object_has_each_key_once() {
+        let setup = Setup {
+            status: "disagrees",
+            declared_shaft_hz: Some(45.0),
+            declared_from: Some("record"),
+            measured_shaft_hz: Some(33.68),
+            source: Some(SpeedSource::Tachometer),
+            check: Some(SetupCheck {
+                declared_shaft_hz: 45.0,
+                lines_shaft_hz: Some(33.68),
+                ratio: 0.748,
+                cause: Some(Cause::SampleRate {
+                    declared_hz: 50_000.0,
+                    likely_hz: 66_807.0,
+                }),
+            }),
+            message: Some("m".into()),
+        };
+        let text = serde_json::to_string(&setup).unwrap();
+        for key in [
+            "status",
+            "declared_shaft_hz",
+            "declared_from",
+            "measured_shaft_hz",
+            "source",
+            "lines_shaft_hz",
+            "ratio",
+            "cause",
+            "declared_hz",
+            "likely_hz",
+            "message",
+        ] {
+            assert_eq!(
+                text.matches(&format!("\"{key}\":")).count(),
+                1,
+                "{key}: {text}"
+            );
+        }
+        assert!(text.contains("\"cause\":\"sample-rate\""), "{text}");
+    }
+}

@@ -67,7 +67,8 @@ pub enum Cause {
 /// The set-up check's verdict.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SetupCheck {
-    /// The input-shaft rate the sender declared, Hz.
+    /// The input-shaft rate the sender declared, Hz (in the answer's `setup` object already).
+    #[serde(skip)]
     pub declared_shaft_hz: f64,
     /// Where the gearbox's lines put the input-shaft rate, Hz (`None`: not read).
     #[serde(skip_serializing_if = "Option::is_none")]
