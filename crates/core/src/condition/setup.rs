@@ -308,19 +308,15 @@ fn mesh_harmonics(
 mod tests {
     use super::*;
     use crate::condition::test_util::spur;
+    use crate::signal::test_util::lcg;
     use std::f64::consts::TAU;
 
     /// A spur train (32T→96T, 48T→80T: shafts 1, 1/3, 1/5) at 29.9 Hz: mesh lines with
     /// sidebands at every shaft's rate, shaft lines, noise.
     fn record(fs: f64, f: f64) -> (Vec<f64>, LineMap) {
-        let mut seed = 11u64;
-        let mut noise = move || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 11) as f64 / (1u64 << 53) as f64) - 0.5
-        };
-        let x = (0..(4.0 * fs) as usize)
+        let n = (4.0 * fs) as usize;
+        let noise = lcg(n, 11);
+        let x = (0..n)
             .map(|i| {
                 let th = TAU * f * i as f64 / fs;
                 let mut v = (32.0 * th).sin() + 0.7 * (16.0 * th).sin() + 0.3 * (48.0 * th).sin();
@@ -332,7 +328,7 @@ mod tests {
                     }
                     v += 0.03 / j * ((j / 3.0) * th).sin() + 0.03 / j * (j * th).sin();
                 }
-                v + 0.3 * noise()
+                v + 0.15 * noise[i]
             })
             .collect();
         (x, LineMap::of(&spur()))

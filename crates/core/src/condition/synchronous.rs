@@ -229,6 +229,7 @@ impl LineProminence {
 mod tests {
     use super::*;
     use crate::condition::test_util::spur;
+    use crate::signal::test_util::lcg;
     use std::f64::consts::TAU;
 
     /// A spur train record at 29.91 Hz: mesh lines, sidebands at the idler's and the output's
@@ -240,13 +241,7 @@ mod tests {
         let map = LineMap::of(&spur());
         let (fs, f) = (20_000.0, 29.91);
         let n = 80_000;
-        let mut seed = 7u64;
-        let mut noise = move || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 11) as f64 / (1u64 << 53) as f64) - 0.5
-        };
+        let noise = lcg(n, 7);
         let x: Vec<f64> = (0..n)
             .map(|i| {
                 let t = i as f64 / fs;
@@ -258,7 +253,7 @@ mod tests {
                     v += 0.04 / j * ((32.0 - j / 5.0) * th).sin();
                     v += 0.03 / j * ((j / 3.0) * th).sin();
                 }
-                v + 1.5 * (TAU * 32.0 * 29.67 * t).sin() + 0.5 * noise()
+                v + 1.5 * (TAU * 32.0 * 29.67 * t).sin() + 0.25 * noise[i]
             })
             .collect();
         let r = synchronous_rate(&x, fs, &map, 30.0, 0.06).unwrap();

@@ -91,9 +91,9 @@ fn check_rate(sample_rate: f64) -> Result<()> {
     Ok(())
 }
 
-/// Helpers the signal modules' unit tests share.
+/// Helpers the signal modules' (and the condition modules') unit tests share.
 #[cfg(test)]
-mod test_util {
+pub(crate) mod test_util {
     /// Deterministic pseudo-random samples in [-1, 1) from a 64-bit LCG (Knuth's MMIX
     /// constants).
     pub fn lcg(n: usize, seed: u64) -> Vec<f64> {
