@@ -26,7 +26,6 @@ use gearwear::signal::order::track_tachometer;
 use rayon::prelude::*;
 
 const DECLARED: [f64; 5] = [1.0, 0.5, 2.0, 0.9, 1.1];
-#[allow(dead_code)]
 const PPR: [usize; 3] = [1, 5, 20];
 
 /// Right, wrong, nothing said.
