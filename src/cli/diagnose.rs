@@ -500,6 +500,13 @@ fn with_flag_hint(e: crate::Error) -> anyhow::Error {
         crate::Error::NoMeshLine { .. } => {
             anyhow::anyhow!("{e}; give --shaft-hz if the input-shaft speed is known")
         }
+        crate::Error::SpeedNotMeasured(_) => anyhow::anyhow!(
+            "{e}; give the tachometer's column (--tacho-column NAME --tacho-ppr N) or the \
+             nominal input-shaft rate (--shaft-hz)"
+        ),
+        crate::Error::TooFewSamples { .. } | crate::Error::TooFewRevolutions { .. } => {
+            anyhow::anyhow!("{e}: give a longer record")
+        }
         e => e.into(),
     }
 }

@@ -1,16 +1,16 @@
 //! `--unit`, `--sensitivity`, `--iso-group`, `--iso-support`: what a record's channels
 //! measure and the machine's ISO 20816-3 class, for `gearwear diagnose` and `gearwear machine
 //! set` (as `channel_units` and `iso_20816` of `PUT /v1/machines/{id}`, checked by the same
-//! [`crate::service::units::check`]).
+//! rules: [`check_declared`]).
 
 use std::collections::BTreeMap;
 
 use anyhow::{Result, bail};
 use clap::Args;
 
-use crate::service::units::{IsoBody, Refusal, check};
 use crate::units::{
-    ANY_CHANNEL, ChannelUnits, IsoClass, MachineUnits, UnitError, UnitSpec, parse_sensitivity,
+    ANY_CHANNEL, ChannelUnits, IsoClass, IsoDeclared, MachineUnits, Refusal, UnitError, UnitSpec,
+    check_declared, parse_sensitivity,
 };
 
 /// The unit flags.
@@ -100,22 +100,22 @@ impl UnitArgs {
         Ok(specs)
     }
 
-    fn iso(&self) -> Option<IsoBody> {
-        Some(IsoBody {
+    fn iso(&self) -> Option<IsoDeclared> {
+        Some(IsoDeclared {
             group: self.iso_group? as f64,
             support: self.iso_support.clone()?,
         })
     }
 
-    /// The flags checked as `PUT /v1/machines/{id}` checks `channel_units` and `iso_20816`:
-    /// the JSON to store and the ISO class. Errors name the flags.
-    pub fn check(
+    /// The flags checked by the rules `PUT /v1/machines/{id}` applies to `channel_units` and
+    /// `iso_20816` ([`check_declared`]). Errors name the flags.
+    fn declared(
         &self,
         channels: Option<&[String]>,
         tacho_channel: Option<&str>,
-    ) -> Result<(Option<String>, Option<IsoClass>)> {
+    ) -> Result<(Option<ChannelUnits>, Option<IsoClass>)> {
         let specs = self.specs()?;
-        check(
+        check_declared(
             Some(specs).filter(|s| !s.is_empty()),
             self.iso().as_ref(),
             channels,
@@ -124,56 +124,68 @@ impl UnitArgs {
         .map_err(|r| anyhow::anyhow!(cli_message(&r)))
     }
 
+    /// The flags as a machine's stored configuration: the `channel_units` JSON and the ISO
+    /// class.
+    pub fn check(
+        &self,
+        channels: Option<&[String]>,
+        tacho_channel: Option<&str>,
+    ) -> Result<(Option<String>, Option<IsoClass>)> {
+        let (units, iso) = self.declared(channels, tacho_channel)?;
+        let text = units
+            .map(|u| serde_json::to_string(&u.specs()))
+            .transpose()?;
+        Ok((text, iso))
+    }
+
     /// The units of `gearwear diagnose`: every declared name must be one of the record's
     /// `names` (but the tachometer's).
     pub fn machine_units(&self, names: &[String], tacho: Option<&str>) -> Result<MachineUnits> {
-        let (text, iso) = self.check(None, tacho)?;
-        let Some(text) = text else {
+        let (units, iso) = self.declared(None, tacho)?;
+        let Some(channels) = units else {
             return Ok(MachineUnits::default());
         };
-        let specs: BTreeMap<String, UnitSpec> = serde_json::from_str(&text)?;
-        for name in specs.keys().filter(|n| *n != ANY_CHANNEL) {
-            if !names.contains(name) {
+        for (name, _) in channels.specs() {
+            if name != ANY_CHANNEL && !names.contains(&name) {
                 bail!(
                     "--unit {name}=…: the record has no channel `{name}` (its channels: {})",
                     names.join(", ")
                 );
             }
         }
-        let channels = ChannelUnits::new(specs)
-            .map_err(|(c, e)| anyhow::anyhow!("{}: {e}", flag("--unit", &c)))?;
         Ok(MachineUnits { channels, iso })
     }
 }
 
 /// A refusal in the words of the command line.
 fn cli_message(r: &Refusal) -> String {
+    let channel = r.channel().unwrap_or(ANY_CHANNEL);
     match r {
-        Refusal::Channel { channel, error } => match error {
-            UnitError::NoSensitivity => format!(
-                "{}: {error}; give it with --sensitivity (e.g. --sensitivity 100mV/g)",
-                flag("--unit", channel)
-            ),
-            UnitError::SensitivityWithoutVolts { .. }
-            | UnitError::TwoSensitivities { .. }
-            | UnitError::BadSensitivity { .. } => {
-                format!("{}: {error}", flag("--sensitivity", channel))
-            }
-            _ => format!("{}: {error}", flag("--unit", channel)),
-        },
-        Refusal::Name { channel, reason } => format!(
-            "{}: {}",
+        Refusal::Channel {
+            error: UnitError::NoSensitivity,
+            ..
+        } => format!(
+            "{}: {r}; give it with --sensitivity (e.g. --sensitivity 100mV/g)",
+            flag("--unit", channel)
+        ),
+        Refusal::Channel {
+            error:
+                UnitError::SensitivityWithoutVolts { .. }
+                | UnitError::TwoSensitivities { .. }
+                | UnitError::BadSensitivity { .. },
+            ..
+        } => format!("{}: {r}", flag("--sensitivity", channel)),
+        Refusal::NotDiagnosed { diagnosed, .. } => format!(
+            "{}: the machine diagnoses only the channels {} (--channels): a unit for \
+             `{channel}` would never be used; name one of them, or a bare --unit for all",
             flag("--unit", channel),
-            reason.replace("(`channels`)", "(--channels)")
+            diagnosed.join(", ")
         ),
-        Refusal::Units(m) => format!("--unit: {m}"),
-        Refusal::Iso(m) => format!(
-            "--iso-group/--iso-support: {}",
-            m.replace(
-                "declare them in `channel_units`",
-                "declare them with --unit"
-            )
-        ),
+        Refusal::IsoGroup(_) | Refusal::IsoClass(_) => {
+            format!("--iso-group/--iso-support: {r}")
+        }
+        Refusal::IsoWithoutUnits => format!("--iso-group/--iso-support: {r} with --unit"),
+        _ => format!("{}: {r}", flag("--unit", channel)),
     }
 }
 

@@ -266,7 +266,31 @@ pub fn problem_from_error(e: &crate::Error) -> ApiError {
             un("invalid-parameter", "Invalid parameter", e.to_string())
                 .with("parameter", name.as_str())
         }
-        E::Signal(m) => un("unusable-record", "Unusable record", m.clone()),
+        E::SpeedNotMeasured(_) => un(
+            "unusable-record",
+            "Shaft rate not measurable",
+            format!(
+                "{e}; give the machine a tachometer channel (`tacho_channel` and `tacho_ppr` of \
+                 PUT /v1/machines/{{id}}) or the record's `shaft_hz`"
+            ),
+        ),
+        E::TooFewSamples {
+            samples, needed, ..
+        } => un(
+            "unusable-record",
+            "Unusable record",
+            format!("{e}: send a longer record"),
+        )
+        .with("samples", *samples as u64)
+        .with("needed_samples", *needed as u64),
+        E::TooFewRevolutions { .. } => un(
+            "unusable-record",
+            "Unusable record",
+            format!("{e}: send a longer record"),
+        ),
+        E::ConstantSignal { .. } | E::TooFewPulses { .. } | E::NoMeshOrder { .. } => {
+            un("unusable-record", "Unusable record", e.to_string())
+        }
         E::Unit(u) => un("invalid-unit", "Unit cannot be used", u.to_string()),
         other => {
             tracing::error!(error = %other, "diagnosis failed");

@@ -115,9 +115,11 @@ impl Tables {
         if let Some(g) = lock(&self.gearboxes).get(&row.hash) {
             return Ok(g.clone());
         }
-        let d: GearboxDescription = serde_json::from_str(&row.description).map_err(|e| {
-            crate::Error::Signal(format!("stored gearbox `{}` unreadable: {e}", row.id))
-        })?;
+        let d: GearboxDescription =
+            serde_json::from_str(&row.description).map_err(|e| crate::Error::Stored {
+                what: format!("gearbox `{}`", row.id),
+                reason: e.to_string(),
+            })?;
         let g = Arc::new(Gearbox::new(d)?);
         lock(&self.gearboxes).insert(row.hash.clone(), g.clone());
         Ok(g)

@@ -386,8 +386,7 @@ pub async fn put(
         b.iso_20816.as_ref(),
         b.channels.as_deref(),
         b.tacho_channel.as_deref(),
-    )
-    .map_err(|r| r.problem())?;
+    )?;
     let created = app
         .store
         .put_machine(

@@ -1,5 +1,5 @@
 //! A machine's physical units: `channel_units` and `iso_20816` of `PUT /v1/machines/{id}` —
-//! checked ([`check`], shared with `gearwear machine set`), stored as JSON and two columns,
+//! checked ([`check`]; the rules are the core's, shared with `gearwear machine set`), stored as JSON and two columns,
 //! shown in the machine's configuration ([`config_json`]), and handed to the assessment
 //! ([`machine_units`]).
 //!
@@ -19,10 +19,10 @@ use serde_json::{Value, json};
 
 use super::error::{ApiError, ApiResult};
 use crate::store::MachineRow;
-use crate::units::{ANY_CHANNEL, ChannelUnits, IsoClass, MachineUnits, UnitError, UnitSpec};
-
-/// Most channels a machine may declare units for (as `channels`).
-const MAX_DECLARED: usize = 64;
+use crate::units::{
+    ANY_CHANNEL, ChannelUnits, IsoClass, IsoDeclared, MachineUnits, Refusal, UnitError, UnitSpec,
+    check_declared,
+};
 
 /// `iso_20816` of a machine's configuration.
 #[derive(Debug, Clone, Deserialize)]
@@ -33,120 +33,59 @@ pub struct IsoBody {
     pub support: String,
 }
 
-/// Why a machine's units were refused, by the part of the configuration at fault.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Refusal {
-    /// One channel's declaration.
-    Channel { channel: String, error: UnitError },
-    /// A declaration for a name that cannot be one of the machine's vibration channels.
-    Name { channel: String, reason: String },
-    /// `channel_units` as a whole.
-    Units(String),
-    /// The ISO class.
-    Iso(String),
+/// The 422 of `PUT /v1/machines/{id}` for a refusal, naming the member to fix.
+pub fn problem(r: &Refusal) -> ApiError {
+    let member = match (r, r.channel()) {
+        (_, Some(c)) => format!("channel_units.{c}"),
+        (Refusal::TooMany { .. }, None) => "channel_units".to_string(),
+        _ => "iso_20816".to_string(),
+    };
+    let detail = match r {
+        Refusal::Channel {
+            error: UnitError::NoSensitivity,
+            ..
+        } => format!(
+            "{r}; give `sensitivity_mv_per_g`, `sensitivity_mv_per_m_s2` or \
+             `sensitivity_mv_per_mm_s`"
+        ),
+        Refusal::NotDiagnosed { channel, diagnosed } => format!(
+            "the machine diagnoses only the channels {} (`channels`): a unit for `{channel}` \
+             would never be used; name one of them, or \"{ANY_CHANNEL}\" for all",
+            diagnosed
+                .iter()
+                .map(|c| format!("`{c}`"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        Refusal::IsoWithoutUnits => format!("{r} in `channel_units`"),
+        _ => r.to_string(),
+    };
+    let (slug, title) = match r {
+        Refusal::Channel { .. } => ("invalid-unit", "Unit cannot be used"),
+        _ => ("invalid-machine", "Invalid machine configuration"),
+    };
+    ApiError::unprocessable(slug, title, format!("`{member}`: {detail}")).with("member", member)
 }
 
-impl Refusal {
-    /// The 422 of `PUT /v1/machines/{id}`, naming the member to fix.
-    pub fn problem(&self) -> ApiError {
-        let (member, detail) = match self {
-            Refusal::Channel { channel, error } => {
-                let hint = match error {
-                    UnitError::NoSensitivity => {
-                        "; give `sensitivity_mv_per_g`, `sensitivity_mv_per_m_s2` or \
-                         `sensitivity_mv_per_mm_s`"
-                    }
-                    _ => "",
-                };
-                (format!("channel_units.{channel}"), format!("{error}{hint}"))
-            }
-            Refusal::Name { channel, reason } => {
-                (format!("channel_units.{channel}"), reason.clone())
-            }
-            Refusal::Units(m) => ("channel_units".to_string(), m.clone()),
-            Refusal::Iso(m) => ("iso_20816".to_string(), m.clone()),
-        };
-        let (slug, title) = match self {
-            Refusal::Channel { .. } => ("invalid-unit", "Unit cannot be used"),
-            _ => ("invalid-machine", "Invalid machine configuration"),
-        };
-        ApiError::unprocessable(slug, title, format!("`{member}`: {detail}")).with("member", member)
-    }
-}
-
-/// Check a machine's units against its `channels` and `tacho_channel`: the `channel_units`
-/// JSON to store and the ISO class.
-///
-/// Refused: a unit that cannot be converted ([`UnitError`]); more than 64 declarations, or a
-/// name of more than 64 characters; a name that is not among `channels` (when the machine
-/// lists them) or is the tachometer's; an ISO group other than 1 or 2 or a support other than
-/// rigid or flexible; an ISO class without units (its zone is judged on a velocity in mm/s).
+/// Check a machine's units ([`check_declared`]): the `channel_units` JSON to store and the
+/// ISO class.
 pub fn check(
     channel_units: Option<BTreeMap<String, UnitSpec>>,
     iso: Option<&IsoBody>,
     channels: Option<&[String]>,
     tacho_channel: Option<&str>,
-) -> Result<(Option<String>, Option<IsoClass>), Refusal> {
-    let iso = iso
-        .map(|b| {
-            let group = if b.group.fract() == 0.0 && b.group.abs() <= 1e15 {
-                b.group as i64
-            } else {
-                return Err(Refusal::Iso(format!(
-                    "`group` is the machine's ISO 20816-3 group, 1 or 2, got {}",
-                    b.group
-                )));
-            };
-            IsoClass::new(group, &b.support).map_err(|e| Refusal::Iso(e.to_string()))
-        })
-        .transpose()?;
-    let Some(specs) = channel_units.filter(|m| !m.is_empty()) else {
-        if iso.is_some() {
-            return Err(Refusal::Iso(
-                "the ISO 20816-3 zone is judged on the velocity in mm/s, which needs the \
-                 channels' units: declare them in `channel_units`"
-                    .into(),
-            ));
-        }
-        return Ok((None, None));
-    };
-    if specs.len() > MAX_DECLARED {
-        return Err(Refusal::Units(format!(
-            "at most {MAX_DECLARED} channels, got {}",
-            specs.len()
-        )));
-    }
-    for name in specs.keys() {
-        let reason = if name.is_empty() || name.len() > 64 {
-            "a channel name is 1 to 64 characters".to_string()
-        } else if Some(name.as_str()) == tacho_channel {
-            "this is the machine's tachometer channel: it gives the speed, not a vibration; \
-             declare units for the vibration channels only"
-                .to_string()
-        } else if let Some(list) = channels.filter(|_| name != ANY_CHANNEL)
-            && !list.contains(name)
-        {
-            format!(
-                "the machine diagnoses only the channels {} (`channels`): a unit for `{name}` \
-                 would never be used; name one of them, or \"{ANY_CHANNEL}\" for all",
-                list.iter()
-                    .map(|c| format!("`{c}`"))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )
-        } else {
-            continue;
-        };
-        return Err(Refusal::Name {
-            channel: name.clone(),
-            reason,
-        });
-    }
-    let units =
-        ChannelUnits::new(specs).map_err(|(channel, error)| Refusal::Channel { channel, error })?;
-    let text = serde_json::to_string(&units.specs())
-        .map_err(|e| Refusal::Units(format!("cannot be written: {e}")))?;
-    Ok((Some(text), iso))
+) -> ApiResult<(Option<String>, Option<IsoClass>)> {
+    let iso = iso.map(|b| IsoDeclared {
+        group: b.group,
+        support: b.support.clone(),
+    });
+    let (units, iso) = check_declared(channel_units, iso.as_ref(), channels, tacho_channel)
+        .map_err(|r| problem(&r))?;
+    let text = units
+        .map(|u| serde_json::to_string(&u.specs()))
+        .transpose()
+        .map_err(|e| ApiError::internal(format!("channel_units cannot be written: {e}")))?;
+    Ok((text, iso))
 }
 
 /// `channel_units` and `iso_20816` of a machine's configuration (null when not declared).

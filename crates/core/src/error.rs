@@ -27,9 +27,65 @@ pub enum Error {
     /// Too many steps for one integration call.
     #[error("step budget of {max_steps} exhausted at τ = {t}")]
     TooManySteps { t: f64, max_steps: usize },
-    /// A signal is too short or otherwise unusable for the requested analysis.
-    #[error("signal: {0}")]
-    Signal(String),
+    /// An analysis needs more samples (or points) than it was given.
+    #[error("{analysis} needs at least {needed} samples; the signal has {samples}")]
+    TooFewSamples {
+        analysis: &'static str,
+        needed: usize,
+        samples: usize,
+    },
+    /// A statistic that a constant signal does not have (zero variance).
+    #[error("{analysis} is undefined for a constant signal ({samples} samples, zero variance)")]
+    ConstantSignal {
+        analysis: &'static str,
+        samples: usize,
+    },
+    /// A value an analysis needs finite is not (record samples are [`Error::NonFiniteSample`]).
+    #[error("{analysis}: {what} is not finite")]
+    NonFiniteValue {
+        analysis: &'static str,
+        what: String,
+    },
+    /// An FFT could not be computed: a buffer of the wrong length, a defect of the caller and
+    /// not of the signal.
+    #[error("FFT of length {len} failed: {reason}")]
+    Fft { len: usize, reason: String },
+    /// The shaft rate could not be measured from the record's own lines.
+    #[error("the shaft rate cannot be measured: {0}")]
+    SpeedNotMeasured(SpeedProblem),
+    /// A tachometer channel with too few pulses to time a revolution.
+    #[error("the tachometer channel has {pulses} pulse(s); at least {needed} are needed")]
+    TooFewPulses { pulses: usize, needed: usize },
+    /// The record is shorter than the shaft revolutions an analysis needs.
+    #[error(
+        "the record covers {revolutions:.2} revolutions of this shaft; at least {needed} are needed"
+    )]
+    TooFewRevolutions { revolutions: f64, needed: f64 },
+    /// Two inputs that must have the same length do not.
+    #[error("{what}: {found} values where {expected} are needed")]
+    LengthMismatch {
+        what: &'static str,
+        expected: usize,
+        found: usize,
+    },
+    /// No mesh order lies in the synchronous average's resolvable range.
+    #[error(
+        "no mesh order of {orders:?} lies in 1 ..= {max_order} (half the samples per revolution)"
+    )]
+    NoMeshOrder {
+        orders: Vec<usize>,
+        max_order: usize,
+    },
+    /// A state-aware baseline whose records say nothing of their repeatability.
+    #[error(
+        "the baseline's records carry no measure of their repeatability (records too short for \
+         two segments) and cannot predict one another (fewer than 3 have a neighbour of their \
+         load): it needs longer healthy records"
+    )]
+    BaselineUnrepeatable,
+    /// Stored data (an effect, a gearbox, a report) that cannot be read or written back.
+    #[error("stored {what} cannot be read or written: {reason}")]
+    Stored { what: String, reason: String },
     /// A plot could not be drawn or written.
     #[error("plot {path}: {reason}")]
     Plot { path: String, reason: String },
@@ -229,6 +285,14 @@ impl Error {
         }
     }
 
+    /// An FFT of length `len` that failed with `e` ([`Error::Fft`]).
+    pub fn fft(len: usize, e: impl std::fmt::Display) -> Self {
+        Error::Fft {
+            len,
+            reason: e.to_string(),
+        }
+    }
+
     /// Shorthand for [`Error::InvalidParameter`].
     pub fn param(name: impl Into<String>, value: f64, reason: impl Into<String>) -> Self {
         Error::InvalidParameter {
@@ -237,6 +301,49 @@ impl Error {
             reason: reason.into(),
         }
     }
+}
+
+/// Why the shaft rate could not be measured from the record ([`Error::SpeedNotMeasured`]).
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum SpeedProblem {
+    /// Nothing to search around: no tachometer and no nominal rate.
+    #[error("there is no tachometer channel and no nominal input-shaft rate to search around")]
+    NoHint,
+    /// No line of the gearbox (or no mesh line) below the usable band's top.
+    #[error(
+        "no {lines} of this gearbox lies under 0.45 × the sample rate ({top_hz:.0} Hz) near \
+         {hint_hz:.2} Hz"
+    )]
+    NoLineInBand {
+        /// `"mesh line"` or `"line"`.
+        lines: &'static str,
+        top_hz: f64,
+        hint_hz: f64,
+    },
+    /// Shaft rates without a common period: their lines do not form one grid.
+    #[error("the shafts' rates are not commensurate, so their lines do not form one grid")]
+    Incommensurate,
+    /// No spectrum bin near the mesh line to track.
+    #[error(
+        "no spectrum bin within ±{search_percent} % of {mesh_hz:.1} Hz to track a mesh line in"
+    )]
+    NoBinNearMesh { mesh_hz: f64, search_percent: f64 },
+    /// The mesh line's demodulated magnitude is too often under a tenth of its median.
+    #[error(
+        "the mesh line near {mesh_hz:.1} Hz is too weak to track: its demodulated magnitude \
+         falls under a tenth of its median on {weak} of {samples} decimated samples"
+    )]
+    MeshLineTooWeak {
+        mesh_hz: f64,
+        weak: usize,
+        samples: usize,
+    },
+    /// The tracked phase of the mesh line does not grow steadily.
+    #[error(
+        "the tracked angle of the mesh line near {mesh_hz:.1} Hz does not increase steadily \
+         (speed too irregular or line too weak to track)"
+    )]
+    IrregularTrack { mesh_hz: f64 },
 }
 
 // What a gearbox description can be refused for (`crate::gearbox`): one variant per mistake,

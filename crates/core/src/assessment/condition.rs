@@ -73,13 +73,10 @@ fn measure_state(
     let fs = facts.sample_rate_hz;
     if let Some(t) = &facts.tacho {
         let Some((_, samples)) = channels.iter().find(|(n, _)| *n == t.name) else {
-            let names: Vec<&str> = channels.iter().map(|(n, _)| n.as_str()).collect();
-            return Err(Error::Signal(format!(
-                "the tachometer channel `{}` is not in the record (its channels: {}); name the \
-                 tachometer's column",
-                t.name,
-                names.join(", ")
-            )));
+            return Err(Error::UnknownChannel {
+                requested: t.name.clone(),
+                available: channels.iter().map(|(n, _)| n.clone()).collect(),
+            });
         };
         let tacho = Tacho {
             samples,
@@ -93,7 +90,7 @@ fn measure_state(
             None,
             facts.load.clone(),
         )
-        .map_err(|e| Error::Signal(format!("tachometer channel `{}`: {e}", t.name)))?;
+        .map_err(|e| e.in_channel(t.name.clone()))?;
         let (angle, mut state) = angle;
         state.hint_hz = facts.shaft_hz.or(machine.input_shaft_hz);
         return Ok(Measured {

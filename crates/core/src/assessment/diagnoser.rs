@@ -115,7 +115,10 @@ fn held_effects(cal: &MachineCalibration) -> crate::Result<HeldEffects> {
         .map(|e| {
             let name = e["name"].as_str().unwrap_or("").to_string();
             let params = serde_json::from_value(e["parameters"].clone()).map_err(|err| {
-                crate::Error::Signal(format!("stored effect `{name}` unreadable: {err}"))
+                crate::Error::Stored {
+                    what: format!("effect `{name}`"),
+                    reason: err.to_string(),
+                }
             })?;
             Ok((name, params))
         })
@@ -315,6 +318,9 @@ impl TableDiagnoser {
             ..CalibrateOptions::default()
         };
         let report = calibrate(rec, &self.table, &opts)?;
-        serde_json::to_value(&report).map_err(|e| crate::Error::Signal(e.to_string()))
+        serde_json::to_value(&report).map_err(|e| crate::Error::Stored {
+            what: "closed-loop report".into(),
+            reason: e.to_string(),
+        })
     }
 }

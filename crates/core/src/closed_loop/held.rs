@@ -49,9 +49,13 @@ impl HeldEffects {
         let mut h = HeldEffects::default();
         for (name, p) in effects {
             let get = |k: &str| {
-                p.get(k).copied().filter(|v| v.is_finite()).ok_or_else(|| {
-                    Error::Signal(format!("stored effect `{name}` lacks parameter `{k}`"))
-                })
+                p.get(k)
+                    .copied()
+                    .filter(|v| v.is_finite())
+                    .ok_or_else(|| Error::Stored {
+                        what: format!("effect `{name}`"),
+                        reason: format!("parameter `{k}` is missing or not finite"),
+                    })
             };
             match name {
                 SHAFT_MODULATION => {
@@ -65,7 +69,10 @@ impl HeldEffects {
                 }
                 TOOTH_DAMAGE => h.tooth = Some((get("stiffness_loss")?, get("shaft_ratio")?)),
                 other => {
-                    return Err(Error::Signal(format!("unknown stored effect `{other}`")));
+                    return Err(Error::Stored {
+                        what: format!("effect `{other}`"),
+                        reason: "no effect of this name is known".into(),
+                    });
                 }
             }
         }
@@ -133,7 +140,7 @@ pub fn decolour_with(x: &[f64], fs: f64, h: &Resonance) -> Result<Vec<f64>> {
     let mut input = x.to_vec();
     let mut spec = fwd.make_output_vec();
     fwd.process(&mut input, &mut spec)
-        .map_err(|e| Error::Signal(format!("FFT: {e}")))?;
+        .map_err(|e| Error::fft(n, e))?;
     for (k, c) in spec.iter_mut().enumerate() {
         let f = k as f64 * fs / n as f64;
         let corr = (-h.gain_db(f)).clamp(-MAX_CORRECTION_DB, MAX_CORRECTION_DB);
@@ -147,7 +154,7 @@ pub fn decolour_with(x: &[f64], fs: f64, h: &Resonance) -> Result<Vec<f64>> {
     }
     let mut out = inv.make_output_vec();
     inv.process(&mut spec, &mut out)
-        .map_err(|e| Error::Signal(format!("inverse FFT: {e}")))?;
+        .map_err(|e| Error::fft(n, e))?;
     let scale = 1.0 / n as f64;
     Ok(out.into_iter().map(|v| v * scale).collect())
 }

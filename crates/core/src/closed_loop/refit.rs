@@ -303,9 +303,10 @@ pub fn refit_held(
     let (_, _, rss) = best_point(&prof);
     let error_db = (rss / j_n).sqrt();
     if !(error_db.is_finite() && error_plain_db.is_finite() && ea.is_finite()) {
-        return Err(Error::Signal(
-            "the refit with the calibrated effects produced a non-finite error".into(),
-        ));
+        return Err(Error::NonFiniteValue {
+            analysis: "the refit with the calibrated effects",
+            what: "the fit error".into(),
+        });
     }
     Ok(HeldRefit {
         ea,

@@ -218,9 +218,10 @@ pub(super) fn assemble(
     let residual_features_before =
         residual_features(&res_before, &m_rel, r, f1, opts.unexplained_db);
     if !(error_before.is_finite() && error_after.is_finite()) {
-        return Err(Error::Signal(
-            "the closed-loop fit produced a non-finite error".into(),
-        ));
+        return Err(Error::NonFiniteValue {
+            analysis: "the closed-loop fit",
+            what: "the fit error".into(),
+        });
     }
     Ok(CalibrationReport {
         f1_hz: f1,

@@ -52,11 +52,13 @@ pub fn log_spectrum(x: &[f64], fs: f64, f1: f64) -> Result<Vec<f64>> {
     }
     let len = (GRID_PERIODS * fs / f1).round() as usize;
     if x.len() < len {
-        return Err(Error::Signal(format!(
-            "the closed loop needs at least {GRID_PERIODS} periods of f1 = {f1:.2} Hz ({len} \
-             samples); the record has {}",
-            x.len()
-        )));
+        return Err(Error::RecordTooShort {
+            samples: x.len(),
+            periods: x.len() as f64 * f1 / fs,
+            f1_hz: f1,
+            needed_periods: GRID_PERIODS as usize,
+            needed_samples: len,
+        });
     }
     let s = welch(x, fs, len, 0.5, Window::Hann)?;
     let res = s.resolution();

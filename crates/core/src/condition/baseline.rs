@@ -198,11 +198,10 @@ impl StateBaseline {
                 })
         });
         if records.len() < MIN_STATE_RECORDS {
-            return Err(Error::Signal(format!(
-                "a state-aware baseline needs at least {MIN_STATE_RECORDS} healthy records with \
-                 a measured speed; it has {}",
-                records.len()
-            )));
+            return Err(Error::BaselineTooSmall {
+                records: records.len(),
+                needed: MIN_STATE_RECORDS,
+            });
         }
         let n = records.len();
         let same_state: Vec<_> = (0..n).map(|i| loo_residual(&records, i, false)).collect();
@@ -215,12 +214,7 @@ impl StateBaseline {
         let spread_across = across_spread(&other_states);
         let within = Within::fit(&spreads, &same_state, &spread_across);
         if within.noise.is_empty() && other_states.iter().all(|r| r.is_empty()) {
-            return Err(Error::Signal(
-                "the baseline's records carry no measure of their repeatability (records too \
-                 short for two segments) and cannot predict one another (fewer than 3 have a \
-                 neighbour of their load): add longer healthy records"
-                    .into(),
-            ));
+            return Err(Error::BaselineUnrepeatable);
         }
         let wscales = within.scales();
         let within_scores: Vec<f64> = same_state

@@ -13,6 +13,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::error::SpeedProblem;
 use crate::gearbox::Gearbox;
 use crate::signal::order::{
     MeshTrackOptions, ShaftAngle, constant_rate_angle, track_mesh_phase, track_tachometer,
@@ -56,11 +57,11 @@ pub fn comb_rate(x: &[f64], fs: f64, gearbox: &Gearbox, hint_hz: f64) -> Result<
     );
     orders.retain(|o| o * hi < 0.45 * fs);
     let Some(&top) = orders.last() else {
-        return Err(Error::Signal(format!(
-            "no mesh line of this gearbox lies under 0.45 × the sample rate ({:.0} Hz) near \
-             {hint_hz:.2} Hz: the rate cannot be found tacho-less; give a tachometer channel",
-            0.45 * fs
-        )));
+        return Err(Error::SpeedNotMeasured(SpeedProblem::NoLineInBand {
+            lines: "mesh line",
+            top_hz: 0.45 * fs,
+            hint_hz,
+        }));
     };
     let step = 0.5 * df / top;
     let score = |f: f64| -> f64 {
@@ -205,14 +206,7 @@ pub fn measure(
             SpeedSource::Tachometer,
         ),
         None => {
-            let h = hint_hz.ok_or_else(|| {
-                Error::Signal(
-                    "the shaft rate cannot be measured: give a tachometer channel (with its \
-                     pulses per revolution) or the nominal input-shaft rate to search around \
-                     (the record's, or the machine's configured one)"
-                        .into(),
-                )
-            })?;
+            let h = hint_hz.ok_or(Error::SpeedNotMeasured(SpeedProblem::NoHint))?;
             (tacho_less(x, fs, gearbox, h)?, SpeedSource::TachoLess)
         }
     };

@@ -18,6 +18,7 @@
 //! near almost anywhere).
 
 use super::lines::LineMap;
+use crate::error::SpeedProblem;
 use crate::signal::{Window, amplitude_spectrum};
 use crate::{Error, Result};
 
@@ -164,13 +165,8 @@ impl LineProminence {
         let df = self.df;
         let (lo, hi) = (hint_hz * (1.0 - search), hint_hz * (1.0 + search));
         let grid = |o_max: f64| -> Result<Vec<(f64, f64)>> {
-            let g = grid_orders(map, o_max).ok_or_else(|| {
-                Error::Signal(
-                    "the shafts' rates are not commensurate: the rate cannot be found from the \
-                     lines they make; give a tachometer channel"
-                        .into(),
-                )
-            })?;
+            let g = grid_orders(map, o_max)
+                .ok_or(Error::SpeedNotMeasured(SpeedProblem::Incommensurate))?;
             Ok(g.into_iter()
                 .filter(|(o, _)| o * hi < self.top_hz())
                 .collect())
@@ -180,11 +176,11 @@ impl LineProminence {
         };
         let coarse = grid(1.5)?;
         if coarse.is_empty() {
-            return Err(Error::Signal(format!(
-                "no line of this gearbox lies under 0.45 × the sample rate ({:.0} Hz) near \
-                 {hint_hz:.2} Hz: the rate cannot be found without a tachometer",
-                self.top_hz()
-            )));
+            return Err(Error::SpeedNotMeasured(SpeedProblem::NoLineInBand {
+                lines: "line",
+                top_hz: self.top_hz(),
+                hint_hz,
+            }));
         }
         let top = coarse.iter().fold(0.0f64, |a, b| a.max(b.0));
         let step = 0.5 * df / top;

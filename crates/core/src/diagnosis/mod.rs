@@ -106,11 +106,18 @@ pub fn diagnose_shifted(
 ) -> Result<Diagnosis> {
     let nf = table.features.lines.len();
     for (what, v) in [("shift", shift), ("shift variance", shift_var)] {
-        if v.len() != nf || v.iter().any(|x| !x.is_finite()) {
-            return Err(Error::Signal(format!(
-                "feature {what}: {} values (need {nf}, all finite)",
-                v.len()
-            )));
+        if v.len() != nf {
+            return Err(Error::LengthMismatch {
+                what,
+                expected: nf,
+                found: v.len(),
+            });
+        }
+        if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+            return Err(Error::NonFiniteValue {
+                analysis: what,
+                what: format!("value {i}"),
+            });
         }
     }
     let matcher = Matcher::new(table, opts)?.with_extra_variance(shift_var);

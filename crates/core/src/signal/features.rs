@@ -82,7 +82,7 @@ fn notch(x: &mut [f64], cycs: &[f64]) -> Result<()> {
         scratch.resize(inv.get_scratch_len(), Default::default());
     }
     fwd.process_with_scratch(x, &mut spec, &mut scratch)
-        .map_err(|e| Error::Signal(format!("FFT failed: {e}")))?;
+        .map_err(|e| Error::fft(n, e))?;
     for &c in cycs {
         let k = (c * n as f64).round() as isize;
         for d in -(REMOVE_BINS as isize)..=REMOVE_BINS as isize {
@@ -100,7 +100,7 @@ fn notch(x: &mut [f64], cycs: &[f64]) -> Result<()> {
         last.im = 0.0;
     }
     inv.process_with_scratch(&mut spec, x, &mut scratch)
-        .map_err(|e| Error::Signal(format!("inverse FFT failed: {e}")))?;
+        .map_err(|e| Error::fft(n, e))?;
     for v in x.iter_mut() {
         *v /= n as f64;
     }
@@ -134,10 +134,11 @@ pub fn condition_indicators(
 ) -> Result<ConditionIndicators> {
     check_samples(x)?;
     if x.len() < 64 {
-        return Err(Error::Signal(format!(
-            "condition indicators need at least 64 samples, the record has {}",
-            x.len()
-        )));
+        return Err(Error::TooFewSamples {
+            analysis: "condition indicators",
+            needed: 64,
+            samples: x.len(),
+        });
     }
     if !(fs.is_finite() && fs > 0.0 && f1.is_finite() && f1 > 0.0 && f1 < 0.5 * fs) {
         return Err(Error::param(
@@ -148,7 +149,10 @@ pub fn condition_indicators(
     }
     let (mean, var, m4) = moments(x);
     if var <= 0.0 {
-        return Err(Error::Signal("the record is constant".into()));
+        return Err(Error::ConstantSignal {
+            analysis: "condition indicators",
+            samples: x.len(),
+        });
     }
     let rms = var.sqrt();
     let peak = x.iter().fold(0.0_f64, |a, v| a.max((v - mean).abs()));

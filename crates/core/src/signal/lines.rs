@@ -146,7 +146,7 @@ pub fn measure_lines(x: &[f64], fs: f64, f1: f64, ratios: &[f64]) -> Result<Line
             *o = (xv - mean) * wv;
         }
         plan.process_with_scratch(&mut input, &mut spectrum, &mut scratch)
-            .map_err(|e| Error::Signal(format!("FFT failed: {e}")))?;
+            .map_err(|e| Error::fft(input.len(), e))?;
         let e: f64 = spectrum[k_lo..=k_hi.max(k_lo)]
             .iter()
             .map(|c| c.norm_sqr())

@@ -26,7 +26,7 @@
 //! * **No detrending**: the mean is kept (it is the DC bin), except in [`line_amplitude`],
 //!   which removes it.
 //! * **Validation**: every function refuses empty records, NaN/±∞ samples, and non-positive or
-//!   non-finite sample rates with an [`Error::Signal`] or [`Error::InvalidParameter`]
+//!   non-finite sample rates with a typed [`Error`] ([`Error::TooFewSamples`], [`Error::InvalidParameter`], …)
 //!   that says what to change. Nothing here panics on any input. The plain statistics
 //!   [`rms`], [`kurtosis`], [`crest_factor`] return `f64` for convenience and give `NaN` for
 //!   unusable input; their `try_*` twins return the explanatory error instead.
@@ -54,27 +54,25 @@ use crate::{Error, Result};
 /// Refuse an empty record or one with a non-finite sample.
 fn check_samples(x: &[f64]) -> Result<()> {
     if x.is_empty() {
-        return Err(Error::Signal(
-            "the record is empty (0 samples); pass at least one sample".into(),
-        ));
+        return Err(Error::EmptyRecord);
     }
     if let Some((i, v)) = x.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-        return Err(Error::Signal(format!(
-            "sample {i} of {} is {v}; the record must contain only finite numbers \
-             (check the simulation for divergence or the input file for gaps)",
-            x.len()
-        )));
+        return Err(Error::NonFiniteSample {
+            index: i,
+            value: *v,
+        });
     }
     Ok(())
 }
 
 /// Refuse a record shorter than `min` samples (after [`check_samples`]).
-fn check_min_len(x: &[f64], min: usize, what: &str) -> Result<()> {
+fn check_min_len(x: &[f64], min: usize, what: &'static str) -> Result<()> {
     if x.len() < min {
-        return Err(Error::Signal(format!(
-            "{what} needs at least {min} samples, the record has {}; use a longer record",
-            x.len()
-        )));
+        return Err(Error::TooFewSamples {
+            analysis: what,
+            needed: min,
+            samples: x.len(),
+        });
     }
     Ok(())
 }

@@ -46,6 +46,7 @@ use serde::{Deserialize, Serialize};
 
 use super::window::{Window, shared_window};
 use super::{PlanCache, Spectrum, amplitude_spectrum, check_rate, check_samples};
+use crate::error::SpeedProblem;
 use crate::{Error, Result};
 
 /// Revolutions of the tracked shaft left out at each end of a mesh-phase track (the circular
@@ -297,10 +298,9 @@ pub fn track_mesh_phase_with(
         *r -= r0;
     }
     if revs.windows(2).any(|w| !(w[1] > w[0])) {
-        return Err(Error::Signal(format!(
-            "the tracked angle of the mesh line near {fm0:.1} Hz does not increase steadily \
-             (speed too irregular or line too weak to track)"
-        )));
+        return Err(Error::SpeedNotMeasured(SpeedProblem::IrregularTrack {
+            mesh_hz: fm0,
+        }));
     }
     // The low-pass's transient lasts about 1 / (lowpass · f_shaft).
     let edge = (EDGE_REVS.max(1.2 / lowpass) * fs / shaft_a).round() as usize;
@@ -360,10 +360,11 @@ fn check_track_inputs(
     let shaft0 = mesh_hz_hint / mesh_order;
     let min_len = (16.0 * fs / shaft0).ceil() as usize;
     if n < min_len {
-        return Err(Error::Signal(format!(
-            "order tracking needs at least 16 revolutions ({min_len} samples at {shaft0:.2} Hz); \
-             the record has {n} samples"
-        )));
+        return Err(Error::TooFewSamples {
+            analysis: "order tracking (16 input-shaft revolutions)",
+            needed: min_len,
+            samples: n,
+        });
     }
     Ok(())
 }
@@ -404,10 +405,10 @@ fn strongest_mesh_harmonic(
         }
     }
     let Some((_, fund)) = best else {
-        return Err(Error::Signal(format!(
-            "no spectrum bin within ±{} % of {mesh_hz_hint:.1} Hz to track a mesh line in",
-            100.0 * opts.search
-        )));
+        return Err(Error::SpeedNotMeasured(SpeedProblem::NoBinNearMesh {
+            mesh_hz: mesh_hz_hint,
+            search_percent: 100.0 * opts.search,
+        }));
     };
     let (mut fm0, mut harmonic, mut top) = (fund, 1.0, f64::NEG_INFINITY);
     for k in 1..=hmax {
@@ -531,10 +532,11 @@ fn demodulated_phase(
     let med = sorted[mid];
     let weak = mags.iter().filter(|&&v| v < 0.1 * med).count();
     if !(med > 0.0) || weak * 100 > nd {
-        return Err(Error::Signal(format!(
-            "the mesh line near {fm0:.1} Hz is too weak to track: its demodulated magnitude \
-             falls under a tenth of its median on {weak} of {nd} decimated samples"
-        )));
+        return Err(Error::SpeedNotMeasured(SpeedProblem::MeshLineTooWeak {
+            mesh_hz: fm0,
+            weak,
+            samples: nd,
+        }));
     }
     let tau = std::f64::consts::TAU;
     let mut psi = Vec::with_capacity(nd);
@@ -630,10 +632,10 @@ pub fn track_tachometer(tacho: &[f64], fs: f64, pulses_per_rev: usize) -> Result
         }
     }
     if pulses.len() < 3 {
-        return Err(Error::Signal(format!(
-            "the tachometer channel has {} pulse(s); at least 3 are needed",
-            pulses.len()
-        )));
+        return Err(Error::TooFewPulses {
+            pulses: pulses.len(),
+            needed: 3,
+        });
     }
     let step = 1.0 / pulses_per_rev as f64;
     let mut revs = Vec::with_capacity(n);
@@ -726,11 +728,11 @@ pub fn angular_resample(
     samples_per_rev: usize,
 ) -> Result<AngularRecord> {
     if x.len() != angle.revs.len() {
-        return Err(Error::Signal(format!(
-            "the record has {} samples and its angle track {}",
-            x.len(),
-            angle.revs.len()
-        )));
+        return Err(Error::LengthMismatch {
+            what: "the angle track of the record's samples",
+            expected: x.len(),
+            found: angle.revs.len(),
+        });
     }
     if !(ratio.is_finite() && ratio > 0.0) {
         return Err(Error::param(
@@ -751,10 +753,10 @@ pub fn angular_resample(
     let start = th(lo);
     let revolutions = (th(hi) - start).floor().max(0.0) as usize;
     if revolutions < 1 {
-        return Err(Error::Signal(format!(
-            "the record covers {:.2} revolutions of this shaft; at least one is needed",
-            th(hi) - start
-        )));
+        return Err(Error::TooFewRevolutions {
+            revolutions: th(hi) - start,
+            needed: 1.0,
+        });
     }
     let p = samples_per_rev;
     let mut out = Vec::with_capacity(revolutions * p);

@@ -141,7 +141,7 @@ impl Fft {
         }
         self.plan
             .process_with_scratch(&mut self.input, &mut self.output, &mut self.scratch)
-            .map_err(|e| Error::Signal(format!("FFT of length {n} failed: {e}")))?;
+            .map_err(|e| Error::fft(n, e))?;
         for (k, (o, c)) in out.iter_mut().zip(&self.output).enumerate() {
             let one_sided = if k == 0 || 2 * k == n { 1.0 } else { 2.0 };
             // |c| as √(re² + im²), not `norm()` (libm's `hypot`, which guards against
@@ -171,7 +171,7 @@ fn freq_axis(n: usize, sample_rate: f64) -> Vec<f64> {
 /// FFT plans come from [`PlanCache::global`], so repeated calls with one length plan once.
 ///
 /// Errors: empty record, fewer than 2 samples, non-finite sample
-/// ([`Error::Signal`]); non-positive or non-finite `sample_rate`
+/// ([`Error::EmptyRecord`], [`Error::TooFewSamples`], [`Error::NonFiniteSample`]); non-positive or non-finite `sample_rate`
 /// ([`Error::InvalidParameter`]).
 pub fn amplitude_spectrum(x: &[f64], sample_rate: f64, window_kind: Window) -> Result<Spectrum> {
     check_rate(sample_rate)?;
@@ -202,7 +202,7 @@ pub fn amplitude_spectrum(x: &[f64], sample_rate: f64, window_kind: Window) -> R
 /// (0.5 is the usual choice for Hann).
 ///
 /// Errors: empty record or non-finite sample, or a record shorter than one segment
-/// ([`Error::Signal`]); `segment_len < 2`, `overlap` outside `[0, 1)` or not finite,
+/// ([`Error::TooFewSamples`], …); `segment_len < 2`, `overlap` outside `[0, 1)` or not finite,
 /// non-positive or non-finite `sample_rate` ([`Error::InvalidParameter`]).
 pub fn welch(
     x: &[f64],
@@ -229,12 +229,11 @@ pub fn welch(
     check_samples(x)?;
     let l = segment_len;
     if x.len() < l {
-        return Err(Error::Signal(format!(
-            "record of {} samples is shorter than one Welch segment of {l} samples; \
-             use segment_len ≤ {} or a longer record",
-            x.len(),
-            x.len()
-        )));
+        return Err(Error::TooFewSamples {
+            analysis: "a Welch segment",
+            needed: l,
+            samples: x.len(),
+        });
     }
     let hop = ((l as f64 * (1.0 - overlap)).round() as usize).clamp(1, l);
     let nseg = 1 + (x.len() - l) / hop;
@@ -266,7 +265,7 @@ pub fn welch(
 /// record should span at least ~4 periods of `freq` and of its separation from other lines).
 /// Cost O(N).
 ///
-/// Errors: empty record, fewer than 8 samples, non-finite sample ([`Error::Signal`]);
+/// Errors: empty record, fewer than 8 samples, non-finite sample ([`Error::TooFewSamples`], [`Error::NonFiniteSample`]);
 /// `freq` not in `(0, sample_rate/2)`, non-positive or non-finite `sample_rate`
 /// ([`Error::InvalidParameter`]).
 pub fn line_amplitude(x: &[f64], sample_rate: f64, freq: f64) -> Result<f64> {
@@ -580,7 +579,10 @@ mod tests {
     }
 
     fn is_signal(e: &Error) -> bool {
-        matches!(e, Error::Signal(_))
+        matches!(
+            e,
+            Error::TooFewSamples { .. } | Error::EmptyRecord | Error::NonFiniteSample { .. }
+        )
     }
     fn is_param(e: &Error, name: &str) -> bool {
         matches!(e, Error::InvalidParameter { name: n, .. } if n == name)
@@ -599,7 +601,7 @@ mod tests {
             welch(&[], 1.0, 16, 0.5, w).unwrap_err(),
             line_amplitude(&[], 1.0, 0.1).unwrap_err(),
         ] {
-            assert!(is_signal(&e) && e.to_string().contains("empty"), "{e}");
+            assert!(matches!(e, Error::EmptyRecord), "{e}");
         }
         for e in [
             amplitude_spectrum(&bad, 1.0, w).unwrap_err(),
@@ -622,7 +624,17 @@ mod tests {
         assert!(is_signal(&amplitude_spectrum(&[1.0], 1.0, w).unwrap_err()));
         assert!(is_signal(&line_amplitude(&[1.0; 7], 1.0, 0.1).unwrap_err()));
         let e = welch(&ok, 1.0, 65, 0.5, w).unwrap_err();
-        assert!(is_signal(&e) && e.to_string().contains("shorter than one Welch segment"));
+        assert!(
+            matches!(
+                e,
+                Error::TooFewSamples {
+                    needed: 65,
+                    samples: 64,
+                    ..
+                }
+            ),
+            "{e}"
+        );
         // Bad Welch parameters.
         for l in [0, 1] {
             assert!(is_param(

@@ -73,10 +73,10 @@ pub fn try_kurtosis(x: &[f64]) -> Result<f64> {
     check_samples(x)?;
     let (m2, m4) = central_moments(x);
     if m2 == 0.0 {
-        return Err(Error::Signal(format!(
-            "kurtosis is undefined for a constant record ({} samples, zero variance)",
-            x.len()
-        )));
+        return Err(Error::ConstantSignal {
+            analysis: "kurtosis",
+            samples: x.len(),
+        });
     }
     Ok(m4 / (m2 * m2))
 }
@@ -94,10 +94,10 @@ pub fn try_crest_factor(x: &[f64]) -> Result<f64> {
     check_samples(x)?;
     let (m2, _) = central_moments(x);
     if m2 == 0.0 {
-        return Err(Error::Signal(format!(
-            "crest factor is undefined for a constant record ({} samples, zero RMS about the mean)",
-            x.len()
-        )));
+        return Err(Error::ConstantSignal {
+            analysis: "crest factor",
+            samples: x.len(),
+        });
     }
     // Moments are scaled by max|x − mean|, so the scaled peak is exactly 1.
     Ok(1.0 / m2.sqrt())
@@ -174,8 +174,8 @@ mod tests {
     #[test]
     fn error_paths() {
         for f in [try_rms, try_kurtosis, try_crest_factor] {
-            let e = f(&[]).unwrap_err().to_string();
-            assert!(e.contains("empty"), "{e}");
+            let e = f(&[]).unwrap_err();
+            assert!(matches!(e, crate::Error::EmptyRecord), "{e}");
             let e = f(&[1.0, f64::NAN, 2.0]).unwrap_err().to_string();
             assert!(e.contains("sample 1") && e.contains("NaN"), "{e}");
             let e = f(&[1.0, f64::INFINITY]).unwrap_err().to_string();

@@ -119,12 +119,9 @@ pub fn tsa_signals(x: &[f64], mesh_orders: &[usize]) -> Result<TsaSignals> {
         .iter()
         .filter(|&&z| z > 0 && z <= p / 2)
         .min()
-        .ok_or_else(|| {
-            Error::Signal(format!(
-                "no mesh order of {mesh_orders:?} lies in 1 ..= {} (half the samples per \
-                 revolution)",
-                p / 2
-            ))
+        .ok_or_else(|| Error::NoMeshOrder {
+            orders: mesh_orders.to_vec(),
+            max_order: p / 2,
         })?;
     let mut spec: Vec<Complex64> = x.iter().map(|&v| Complex64::new(v, 0.0)).collect();
     PlanCache::global().complex(p, false).process(&mut spec);

@@ -177,7 +177,7 @@ fn real_fft(mut y: Vec<f64>) -> Result<Vec<Complex<f64>>> {
     let plan = PlanCache::global().forward(n);
     let mut out = plan.make_output_vec();
     plan.process(&mut y, &mut out)
-        .map_err(|e| Error::Signal(format!("FFT of length {n} failed: {e}")))?;
+        .map_err(|e| Error::fft(n, e))?;
     Ok(out)
 }
 
@@ -286,7 +286,7 @@ fn differentiate(v: &[f64], fs: f64) -> Result<(Vec<f64>, usize)> {
     let plan = PlanCache::global().inverse(n);
     let mut a = plan.make_output_vec();
     plan.process(&mut spectrum, &mut a)
-        .map_err(|e| Error::Signal(format!("inverse FFT of length {n} failed: {e}")))?;
+        .map_err(|e| Error::fft(n, e))?;
     Ok((a, taper))
 }
 

@@ -20,6 +20,7 @@
 //! V; two sensitivities; a sensitivity that is not a number above 0 and at most
 //! [`MAX_SENSITIVITY`].
 
+pub mod declared;
 pub mod iso;
 pub mod vibration;
 
@@ -29,6 +30,7 @@ use serde::{Deserialize, Serialize};
 
 pub use crate::error::UnitError;
 pub use crate::signal::velocity::Kinematic;
+pub use declared::{IsoDeclared, Refusal, check_declared};
 pub use iso::{IsoClass, IsoZone, Support, Zone};
 pub use vibration::{Vibration, WearUm, vibration};
 

@@ -20,7 +20,7 @@ use crate::{Error, Result};
 /// propagated.
 ///
 /// Errors: empty or non-finite `x0`, non-positive or non-finite `d0`/`interval`,
-/// `n_intervals == 0`, or a separation that becomes zero or non-finite ([`Error::Signal`]).
+/// `n_intervals == 0`, or a separation that becomes zero or non-finite ([`Error::NonFiniteValue`]).
 pub fn largest_lyapunov<F>(
     x0: &[f64],
     d0: f64,
@@ -33,12 +33,17 @@ where
     F: FnMut(&mut [f64], f64) -> Result<()>,
 {
     if x0.is_empty() {
-        return Err(Error::Signal("Lyapunov exponent: empty state".into()));
+        return Err(Error::TooFewSamples {
+            analysis: "the Lyapunov exponent's state",
+            needed: 1,
+            samples: 0,
+        });
     }
     if x0.iter().any(|v| !v.is_finite()) {
-        return Err(Error::Signal(
-            "Lyapunov exponent: non-finite initial state".into(),
-        ));
+        return Err(Error::NonFiniteValue {
+            analysis: "the Lyapunov exponent",
+            what: "the initial state".into(),
+        });
     }
     if !(d0.is_finite() && d0 > 0.0) {
         return Err(Error::param("d0", d0, "must be finite and > 0"));
@@ -67,9 +72,10 @@ where
             .sum::<f64>()
             .sqrt();
         if !dist.is_finite() || dist == 0.0 {
-            return Err(Error::Signal(format!(
-                "Lyapunov exponent: separation became {dist} in interval {k}"
-            )));
+            return Err(Error::NonFiniteValue {
+                analysis: "the Lyapunov exponent",
+                what: format!("the separation in interval {k} ({dist})"),
+            });
         }
         sum_log += (dist / d0).ln();
         let s = d0 / dist;

@@ -166,7 +166,7 @@ pub struct Classification {
 /// section points; two-frequency (torus) sections are only separated from chaos by the 0–1
 /// test and need that many.
 ///
-/// Errors ([`Error::Signal`] / [`Error::InvalidParameter`]): fewer than 2 points, a
+/// Errors ([`Error::TooFewSamples`], [`Error::NonFiniteValue`], [`Error::InvalidParameter`]): fewer than 2 points, a
 /// non-finite point, a non-finite or non-positive scale component, invalid options.
 pub fn classify(
     points: &[(f64, f64)],
@@ -176,19 +176,20 @@ pub fn classify(
     validate_options(opts)?;
     validate_scale(scale)?;
     if points.len() < 2 {
-        return Err(Error::Signal(format!(
-            "motion classification needs at least 2 Poincaré points, got {}",
-            points.len()
-        )));
+        return Err(Error::TooFewSamples {
+            analysis: "motion classification (Poincaré points)",
+            needed: 2,
+            samples: points.len(),
+        });
     }
     if let Some(i) = points
         .iter()
         .position(|&(x, v)| !x.is_finite() || !v.is_finite())
     {
-        return Err(Error::Signal(format!(
-            "non-finite Poincaré point at index {i}: {:?}",
-            points[i]
-        )));
+        return Err(Error::NonFiniteValue {
+            analysis: "motion classification",
+            what: format!("Poincaré point {i} {:?}", points[i]),
+        });
     }
     let scaled: Vec<(f64, f64)> = points
         .iter()
@@ -269,9 +270,10 @@ pub fn classify_with_lyapunov(
     opts: &ClassifyOptions,
 ) -> Result<Classification> {
     if !lyapunov_per_period.is_finite() {
-        return Err(Error::Signal(format!(
-            "Lyapunov exponent must be finite, got {lyapunov_per_period}"
-        )));
+        return Err(Error::NonFiniteValue {
+            analysis: "motion classification",
+            what: format!("the Lyapunov exponent ({lyapunov_per_period})"),
+        });
     }
     let mut c = classify(points, scale, opts)?;
     c.lyapunov_per_period = Some(lyapunov_per_period);

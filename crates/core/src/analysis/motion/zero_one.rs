@@ -36,18 +36,20 @@ const N_C: usize = 100;
 /// The mean-square displacement is evaluated for all `n` at once with an FFT autocorrelation
 /// of `z = p + iq`, so the cost is `O(N log N)` per `c`.
 ///
-/// Errors: [`Error::Signal`] for `N < 50` or a non-finite sample.
+/// Errors: [`Error::TooFewSamples`] for `N < 50`, [`Error::NonFiniteValue`] for a non-finite sample.
 pub fn zero_one_test(series: &[f64]) -> Result<f64> {
     if series.len() < MIN_01_LEN {
-        return Err(Error::Signal(format!(
-            "0-1 test needs at least {MIN_01_LEN} samples, got {}",
-            series.len()
-        )));
+        return Err(Error::TooFewSamples {
+            analysis: "the 0-1 test",
+            needed: MIN_01_LEN,
+            samples: series.len(),
+        });
     }
     if let Some(i) = series.iter().position(|s| !s.is_finite()) {
-        return Err(Error::Signal(format!(
-            "0-1 test: non-finite sample at index {i}"
-        )));
+        return Err(Error::NonFiniteValue {
+            analysis: "the 0-1 test",
+            what: format!("sample {i}"),
+        });
     }
     let (lo, hi) = series
         .iter()
