@@ -9,7 +9,8 @@
 //! - [`cli`]: the subcommands.
 //! - [`service`]: the HTTP API, the dashboard and the webhooks; [`store`]: SQLite and
 //!   PostgreSQL behind one trait; [`keys`]: API keys; [`configuration`], [`database`] (where
-//!   the database is), [`telemetry`].
+//!   the database is), [`telemetry`]; [`views`]: the JSON of stored rows and of webhook
+//!   events, shared by the API and the CLI.
 
 // Numeric kernels index several arrays with one loop variable; iterator chains would hide the
 // equations. `!(x > 0.0)` is used on purpose: it is true for NaN, which must be refused too.
@@ -28,3 +29,4 @@ pub mod database;
 pub mod keys;
 pub mod service;
 pub mod telemetry;
+pub mod views;

@@ -5,7 +5,8 @@ use anyhow::{Result, bail};
 use clap::{Args, Subcommand, ValueEnum};
 
 use crate::database::DatabaseArg;
-use crate::store::{Acknowledged, AlertFilter, alert_json, now_ms};
+use crate::store::{Acknowledged, AlertFilter, now_ms};
+use crate::views::alert_json;
 
 #[derive(Debug, Args)]
 pub struct AlertsArgs {

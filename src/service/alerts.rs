@@ -17,7 +17,8 @@ use super::auth::Caller;
 use super::error::{ApiError, ApiResult};
 use super::http::{check_machine_id, read_body};
 use crate::keys::Scope;
-use crate::store::{Acknowledged, AlertFilter, alert_event_json, alert_json, now_ms};
+use crate::store::{Acknowledged, AlertFilter, now_ms};
+use crate::views::{alert_event_json, alert_json};
 
 /// Longest acknowledgement note, in characters.
 pub const MAX_NOTE_CHARS: usize = 4000;

@@ -11,8 +11,9 @@ use super::auth::Caller;
 use super::error::{ApiError, ApiResult, unknown_machine};
 use super::gearboxes::BUILTIN_ID;
 use super::http::{check_machine_id, json_with_etag};
-use crate::store::{DiagnosisRow, MachineRow, novelty_json, wear_json};
+use crate::store::{DiagnosisRow, MachineRow};
 use crate::time::{parse_rfc3339, rfc3339};
+use crate::views::{novelty_json, wear_json};
 
 /// How many diagnoses the machine view's wear trend shows (the latest by measurement time,
 /// the same as its `trend_summary` fits).

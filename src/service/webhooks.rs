@@ -235,7 +235,8 @@ fn delivery_json(d: &DeliveryRow, attempts: Vec<AttemptRow>) -> Value {
         "created_at": rfc3339(d.created_at),
         "next_attempt_at": (d.status == "pending").then(|| rfc3339(d.next_attempt_at)),
         "delivered_at": d.delivered_at.map(rfc3339),
-        "payload": serde_json::from_str::<Value>(&d.payload).unwrap_or(Value::Null),
+        "payload": serde_json::from_str::<Value>(&crate::views::delivery_payload(&d.payload))
+            .unwrap_or(Value::Null),
         "attempts": attempts.iter().map(|a| json!({
             "attempt": a.attempt,
             "attempted_at": rfc3339(a.attempted_at),
@@ -317,7 +318,8 @@ pub async fn worker(app: AppState, mut stop: watch::Receiver<bool>) {
 async fn deliver(app: &AppState, d: &DeliveryRow, w: &WebhookRow) {
     let ws = &app.settings.webhooks;
     let t = now_ms() / 1000;
-    let sig = keys::sign_webhook(&w.secret, t, d.payload.as_bytes());
+    let payload = crate::views::delivery_payload(&d.payload);
+    let sig = keys::sign_webhook(&w.secret, t, payload.as_bytes());
     let started = Instant::now();
     // A subscription made before the URL rules (or written to the store by hand) is checked
     // again here; a refused URL fails at once, retrying cannot help.
@@ -337,7 +339,7 @@ async fn deliver(app: &AppState, d: &DeliveryRow, w: &WebhookRow) {
                 .header("gearwear-event", &d.event)
                 .header("gearwear-delivery", &d.id)
                 .header("gearwear-signature", sig)
-                .body(d.payload.clone())
+                .body(payload)
                 .send()
                 .await;
             match &res {

@@ -423,7 +423,7 @@ async fn a_database_from_before_the_tachometer_keeps_working(b: Backend) {
     let ds = st.list_diagnoses("old", 0, i64::MIN, 10).await.unwrap();
     let wear: Vec<(&str, bool)> = ds.iter().map(|d| (d.id.as_str(), d.has_wear)).collect();
     assert_eq!(wear, [("withheld", false), ("worn", true)]);
-    assert!(store::wear_json(&ds[0]).is_null());
+    assert!(gearwear::views::wear_json(&ds[0]).is_null());
     st.close().await;
 }
 

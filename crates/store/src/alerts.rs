@@ -9,10 +9,10 @@
 use async_trait::async_trait;
 use gearwear_core::assessment::Level;
 use gearwear_core::assessment::episodes::EpisodePolicy;
-use serde_json::{Value, json};
+use serde::{Deserialize, Serialize};
 
 use super::StoreResult;
-use crate::time::rfc3339;
+use crate::events::{DiagnosisEvent, Event, QueuedEvent};
 
 /// What the ingest needs to advance a machine's episode with one record.
 #[derive(Debug, Clone)]
@@ -25,7 +25,7 @@ pub struct AlertInput {
 }
 
 /// One episode.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct AlertRow {
     pub id: String,
     pub machine_id: String,
@@ -87,85 +87,45 @@ pub fn stored_level(text: String) -> StoreResult<Level> {
         .map_err(|e: gearwear_core::words::UnknownWord| crate::StoreError::Decode(e.to_string()))
 }
 
-/// The API's JSON of an episode (without its audit trail).
-pub fn alert_json(a: &AlertRow) -> Value {
-    json!({
-        "id": a.id,
-        "machine_id": a.machine_id,
-        "level": a.level,
-        "state": a.state,
-        "opened_at": rfc3339(a.opened_at),
-        "acknowledged_at": a.acknowledged_at.map(rfc3339),
-        "acknowledged_by": a.acknowledged_by,
-        "note": a.note,
-        "closed_at": a.closed_at.map(rfc3339),
-        "closed_record_id": a.closed_record_id,
-        "peak_severity": a.peak_severity,
-        "record_id": a.record_id,
-    })
-}
-
-/// The API's JSON of an audit line.
-pub fn alert_event_json(e: &AlertEventRow) -> Value {
-    json!({
-        "at": rfc3339(e.at),
-        "event": e.event,
-        "by": e.by,
-        "note": e.note,
-        "record_id": e.record_id,
-        "level": e.level,
-        "severity": e.severity,
-    })
-}
-
-/// The webhook events of an episode's transition: `alert.opened`, `alert.acknowledged` or
-/// `alert.closed` (an escalation has none of its own), and the documented
-/// `wear.threshold_crossed` on opening and escalating, with `extra` (the record's diagnosis
-/// payload) and `previous_alert_level` (`ok` when it opened, `warning` when it escalated).
+/// The webhook events of an episode's transition (`event`: `opened`, `escalated`,
+/// `acknowledged` or `closed`): `alert.opened`, `alert.acknowledged` or `alert.closed` (an
+/// escalation has none of its own), and `wear.threshold_crossed` on opening and escalating,
+/// with the record's diagnosis `by` and the level before (`ok` when it opened, `warning` when
+/// it escalated).
 pub fn transition_events(
     a: &AlertRow,
     event: &str,
-    extra: Option<&Value>,
+    by: Option<&DiagnosisEvent>,
     event_id: &str,
-) -> Vec<(String, String)> {
+) -> Vec<QueuedEvent> {
     let mut out = Vec::new();
-    let name = match event {
-        "opened" => Some("alert.opened"),
-        "acknowledged" => Some("alert.acknowledged"),
-        "closed" => Some("alert.closed"),
+    let record = by.map(DiagnosisEvent::record);
+    let alert = a.clone();
+    let own = match (event, record) {
+        ("opened", Some(by)) => Some(Event::AlertOpened { alert, by }),
+        ("closed", Some(by)) => Some(Event::AlertClosed { alert, by }),
+        ("acknowledged", _) => Some(Event::AlertAcknowledged { alert }),
         _ => None,
     };
-    if let Some(name) = name {
-        let mut p = json!({
-            "event": name,
-            "event_id": event_id,
-            "machine_id": a.machine_id,
-            "alert": alert_json(a),
-        });
-        if let Some(Value::Object(m)) = extra {
-            for k in ["record_id", "diagnosis_id"] {
-                if let Some(v) = m.get(k) {
-                    p[k] = v.clone();
-                }
-            }
-        }
-        out.push((name.to_string(), p.to_string()));
+    if let Some(e) = own {
+        out.push(QueuedEvent::new(event_id.to_string(), e));
     }
-    if matches!(event, "opened" | "escalated")
-        && let Some(Value::Object(m)) = extra
-    {
-        let mut p = Value::Object(m.clone());
-        p["event"] = "wear.threshold_crossed".into();
-        p["event_id"] = format!("{event_id}-crossed").into();
-        p["previous_alert_level"] = if event == "opened" {
-            Level::Ok
-        } else {
-            Level::Warning
-        }
-        .as_str()
-        .into();
-        p["alert_id"] = a.id.clone().into();
-        out.push(("wear.threshold_crossed".to_string(), p.to_string()));
+    if let (Some(previous_alert_level), Some(d)) = (
+        match event {
+            "opened" => Some(Level::Ok),
+            "escalated" => Some(Level::Warning),
+            _ => None,
+        },
+        by,
+    ) {
+        out.push(QueuedEvent::new(
+            format!("{event_id}-crossed"),
+            Event::WearThresholdCrossed {
+                diagnosis: d.clone(),
+                previous_alert_level,
+                alert_id: a.id.clone(),
+            },
+        ));
     }
     out
 }
@@ -257,16 +217,15 @@ macro_rules! alerts_sql {
 
         /// Advance the machine's episode by one record, inside the record's transaction (the
         /// machine's row is locked by the caller): the counts, the episode row, its audit line.
-        /// Returns the webhook events of the transition (`extra`: the record's diagnosis
-        /// payload, for `wear.threshold_crossed`).
+        /// Returns the webhook events of the transition (`by`: the record's diagnosis).
         pub(crate) async fn step_in(
             tx: &mut sqlx::Transaction<'_, $db>,
             machine_id: &str,
             record_id: &str,
             input: &AlertInput,
-            extra: &serde_json::Value,
+            by: &DiagnosisEvent,
             now: i64,
-        ) -> StoreResult<Vec<(String, String)>> {
+        ) -> StoreResult<Vec<QueuedEvent>> {
             let counts = sqlx::query(
                 "SELECT rising, alarm_run, falling, run_peak FROM alert_trackers \
                  WHERE machine_id = $1",
@@ -400,7 +359,7 @@ macro_rules! alerts_sql {
                 _ => None,
             };
             Ok(match row {
-                Some((a, event)) => transition_events(&a, event, Some(extra), &new_id()),
+                Some((a, event)) => transition_events(&a, event, Some(by), &new_id()),
                 None => Vec::new(),
             })
         }

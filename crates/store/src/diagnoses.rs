@@ -1,4 +1,4 @@
-//! Stored diagnoses, their alert levels and the JSON views of their wear and novelty.
+//! Stored diagnoses and their alert levels.
 
 use async_trait::async_trait;
 
@@ -29,25 +29,6 @@ pub struct DiagnosisRow {
     /// When its record was measured, unix ms: the record's `recorded_at`, else its receive
     /// time. Series are ordered by it.
     pub measured_at: i64,
-}
-
-/// `{estimate, lower, upper}`, or null for a diagnosis without a wear degree.
-pub fn wear_json(d: &DiagnosisRow) -> serde_json::Value {
-    if d.has_wear {
-        serde_json::json!({"estimate": d.ea_estimate, "lower": d.ea_lower, "upper": d.ea_upper})
-    } else {
-        serde_json::Value::Null
-    }
-}
-
-/// `{score, threshold, anomalous}`, or null without a baseline.
-pub fn novelty_json(d: &DiagnosisRow) -> serde_json::Value {
-    match (d.novelty_score, d.novelty_threshold) {
-        (Some(s), Some(t)) => {
-            serde_json::json!({"score": s, "threshold": t, "anomalous": s > t})
-        }
-        _ => serde_json::Value::Null,
-    }
 }
 
 /// Reading diagnoses back (they are written by

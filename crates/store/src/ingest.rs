@@ -5,7 +5,7 @@ use async_trait::async_trait;
 
 use super::StoreResult;
 use super::alerts::AlertInput;
-use super::diagnoses::{DiagnosisRow, novelty_json, wear_json};
+use super::diagnoses::DiagnosisRow;
 
 /// An accepted record's metadata, features and (optionally) raw samples.
 #[derive(Debug, Clone)]
@@ -50,9 +50,9 @@ pub struct Ingest {
     pub record: NewRecord,
     pub diagnosis: DiagnosisRow,
     pub idempotency: Option<IdemRow>,
-    /// Members added to each webhook payload of this record besides the diagnosis row's (the
-    /// service's: the deciding channel's `findings` and the record's `operating_state`); a
-    /// member of the same name as a row's is not replaced.
+    /// Members the service adds to each webhook event of this record besides the diagnosis
+    /// row's (the deciding channel's `findings`, the record's `operating_state`, the
+    /// machine's `trend_summary`), carried in [`DiagnosisEvent::extras`](crate::events::DiagnosisEvent::extras).
     pub event_extras: serde_json::Map<String, serde_json::Value>,
     /// Store the record only if its machine is registered (`registered_at` set by
     /// `PUT /v1/machines/{id}`), else fail with [`StoreError::UnregisteredMachine`](crate::StoreError::UnregisteredMachine)
@@ -62,40 +62,6 @@ pub struct Ingest {
     /// The record's step of its machine's alert episode (`None`: the episode is left as it
     /// is — the store's own tests).
     pub alert: Option<AlertInput>,
-}
-
-/// The payload of a record's webhook events: the diagnosis row's members and the ingest's
-/// [`event_extras`](Ingest::event_extras) (`event` is set by each event).
-pub fn diagnosis_payload(ing: &Ingest, event_id: &str) -> serde_json::Value {
-    let d = &ing.diagnosis;
-    let mut base = serde_json::json!({
-        "event_id": event_id,
-        "machine_id": d.machine_id,
-        "diagnosis_id": d.id,
-        "record_id": d.record_id,
-        "created_at": crate::time::rfc3339(d.created_at),
-        "measured_at": crate::time::rfc3339(d.measured_at),
-        "wear_degree": wear_json(d),
-        "alert_level": d.alert_level,
-        "motion_state": d.motion_state,
-        "novelty": novelty_json(d),
-        "channel": d.channel,
-    });
-    if let serde_json::Value::Object(m) = &mut base {
-        for (k, v) in &ing.event_extras {
-            m.entry(k.clone()).or_insert_with(|| v.clone());
-        }
-    }
-    base
-}
-
-/// The webhook events an ingest raises besides its alert episode's
-/// ([`crate::alerts::transition_events`]): `diagnosis.created`, always. Payloads are JSON
-/// texts ([`diagnosis_payload`]).
-pub fn ingest_events(ing: &Ingest, event_id: &str) -> Vec<(String, String)> {
-    let mut created = diagnosis_payload(ing, event_id);
-    created["event"] = "diagnosis.created".into();
-    vec![("diagnosis.created".to_string(), created.to_string())]
 }
 
 /// Accepted records and the answers to idempotency keys.
@@ -118,6 +84,7 @@ macro_rules! ingest_sql {
     ($store:ident, $db:ty) => {
         use super::alerts::step_in;
         use super::webhooks::queue_events;
+        use $crate::events::{DiagnosisEvent, Event, QueuedEvent};
         use super::$store;
         use sqlx::Row;
         use $crate::*;
@@ -213,13 +180,16 @@ macro_rules! ingest_sql {
             .bind(rec.baseline as i64)
             .execute(&mut **tx)
             .await?;
-            let event_id = new_id();
-            let mut events = ingest_events(ing, &event_id);
+            let diagnosis = DiagnosisEvent::of(ing);
+            let mut events = Vec::new();
             if let Some(a) = &ing.alert {
-                let payload = diagnosis_payload(ing, &event_id);
-                let step = step_in(tx, &rec.machine_id, &rec.id, a, &payload, rec.received_at);
+                let step = step_in(tx, &rec.machine_id, &rec.id, a, &diagnosis, rec.received_at);
                 events.extend(step.await?);
             }
+            events.insert(
+                0,
+                QueuedEvent::new(new_id(), Event::DiagnosisCreated { diagnosis }),
+            );
             queue_events(tx, &events, rec.received_at).await
         }
 

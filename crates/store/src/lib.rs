@@ -82,6 +82,7 @@ pub mod alerts;
 pub mod baselines;
 pub mod calibration;
 pub mod diagnoses;
+pub mod events;
 pub mod gearboxes;
 pub mod ingest;
 pub mod keys;
@@ -94,18 +95,16 @@ pub mod time;
 pub mod webhooks;
 
 pub use alerts::{
-    Acknowledged, AlertEventRow, AlertFilter, AlertInput, AlertRow, AlertStore, alert_event_json,
-    alert_json, transition_events,
+    Acknowledged, AlertEventRow, AlertFilter, AlertInput, AlertRow, AlertStore, transition_events,
 };
 pub use baselines::{BaselineRecord, BaselineStore};
 pub use calibration::{CalibrationRow, CalibrationStore};
-pub use diagnoses::{DiagnosisRow, DiagnosisStore, novelty_json, wear_json};
+pub use diagnoses::{DiagnosisRow, DiagnosisStore};
+pub use events::{DiagnosisEvent, Event, QueuedEvent};
 pub use gearboxes::{GearboxRow, GearboxStore, PutOutcome};
-pub use ingest::{IdemRow, Ingest, IngestStore, NewRecord, diagnosis_payload, ingest_events};
+pub use ingest::{IdemRow, Ingest, IngestStore, NewRecord};
 pub use keys::{KeyRow, KeyStore};
-pub use machines::{
-    MachineConfig, MachineDeletion, MachineRow, MachineStore, machine_deleted_event,
-};
+pub use machines::{MachineConfig, MachineDeletion, MachineRow, MachineStore};
 pub use retention::RetentionStore;
 pub use webhooks::{AttemptRow, DeliveryRow, Outcome, WebhookRow, WebhookStore};
 

@@ -54,7 +54,7 @@ pub struct MachineConfig {
 }
 
 /// What [`MachineStore::delete_machine`] took away.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct MachineDeletion {
     pub machine_id: String,
     /// Records (with their raw samples and baseline marks).
@@ -66,21 +66,6 @@ pub struct MachineDeletion {
     pub idempotency_answers: u64,
     /// Its alert level before the deletion (`None`: it had only a calibration).
     pub alert_level: Option<gearwear_core::assessment::Level>,
-}
-
-/// The payload of the `machine.deleted` webhook event: what was deleted, when.
-pub fn machine_deleted_event(d: &MachineDeletion, event_id: &str, now: i64) -> String {
-    serde_json::json!({
-        "event": "machine.deleted",
-        "event_id": event_id,
-        "machine_id": d.machine_id,
-        "deleted_at": crate::time::rfc3339(now),
-        "records": d.records,
-        "diagnoses": d.diagnoses,
-        "calibration": d.calibration,
-        "alert_level": d.alert_level,
-    })
-    .to_string()
 }
 
 /// Machines.
@@ -267,9 +252,12 @@ macro_rules! machines_sql {
                     idempotency_answers,
                     alert_level,
                 };
-                let event = (
-                    "machine.deleted".to_string(),
-                    machine_deleted_event(&d, &new_id(), now),
+                let event = $crate::events::QueuedEvent::new(
+                    new_id(),
+                    $crate::events::Event::MachineDeleted {
+                        deletion: d.clone(),
+                        deleted_at: now,
+                    },
                 );
                 super::webhooks::queue_events(&mut tx, &[event], now).await?;
                 tx.commit().await?;

@@ -21,6 +21,8 @@ pub struct DeliveryRow {
     pub id: String,
     pub webhook_id: String,
     pub event: String,
+    /// The queued event ([`crate::events::QueuedEvent`] as JSON; a payload queued already
+    /// rendered by an earlier build is delivered as it is).
     pub payload: String,
     /// `pending`, `delivered`, `failed`.
     pub status: String,
@@ -94,20 +96,26 @@ macro_rules! webhooks_sql {
             })
         }
 
-        /// Queue each `(event, payload)` for every live subscription that asked for it, inside
-        /// the caller's transaction (so an event exists exactly when what raised it is
-        /// committed); `now` is the deliveries' creation and first due time.
+        /// Queue each event for every live subscription that asked for it, inside the
+        /// caller's transaction (so an event exists exactly when what raised it is
+        /// committed); `now` is the deliveries' creation and first due time. The payload
+        /// column holds the typed event; the webhook worker renders it.
         pub(crate) async fn queue_events(
             tx: &mut sqlx::Transaction<'_, $db>,
-            events: &[(String, String)],
+            events: &[$crate::events::QueuedEvent],
             now: i64,
         ) -> StoreResult<()> {
             let hooks = sqlx::query("SELECT * FROM webhooks WHERE deleted_at IS NULL")
                 .fetch_all(&mut **tx)
                 .await?;
+            let events = events
+                .iter()
+                .map(|q| Ok((q.event.name(), serde_json::to_string(q)?)))
+                .collect::<Result<Vec<_>, serde_json::Error>>()
+                .map_err(|e| StoreError::Decode(format!("an event cannot be written: {e}")))?;
             for h in &hooks {
                 let h = webhook_row(h)?;
-                for (event, payload) in events {
+                for (event, payload) in &events {
                     if !h.events.iter().any(|e| e == event || e == "*") {
                         continue;
                     }

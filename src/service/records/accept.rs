@@ -1,0 +1,380 @@
+//! The steps of every record path (HTTP and MQTT): the machine and the decoded record
+//! ([`prepare`]), the assessment off the async runtime and the store in one transaction
+//! ([`accept`]).
+
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+
+use super::idempotency::Idempotency;
+use super::rows::{Ids, answer, diagnosis_row, event_extras, measured_at, record_row};
+use crate::assessment::{
+    Assessment, Baselines, Machine, MachineCalibration, RecordFacts, TableDiagnoser, TachoChannel,
+    Thresholds, assess,
+};
+use crate::gearbox::Gearbox;
+use crate::service::AppState;
+use crate::service::error::{ApiError, ApiResult, problem_from_error};
+use crate::service::machines::{DEFAULT_TACHO_CHANNEL, MachineContext};
+use crate::service::metrics::StageClock;
+use crate::service::spectrum::{PlotSpectrum, plot_from_spectrum, plot_spectrum};
+use crate::service::wire::{BodyFormat, Decoded, RecordQuery, decode};
+use crate::store::{AlertInput, IdemRow, Ingest, MachineRow, StoreError, new_id, now_ms};
+use crate::units::MachineUnits;
+
+/// A decoded record with its machine and what came with it: what [`prepare`] hands to
+/// [`accept`].
+pub struct Prepared {
+    machine: Option<MachineRow>,
+    /// The decoded record.
+    pub dec: Decoded,
+    request: RecordRequest,
+    /// Warnings about how the body was read (a sniffed format), added to the assessment's.
+    pub warnings: Vec<String>,
+}
+
+/// The steps of every record path (HTTP and MQTT) before the assessment: the machine (and,
+/// with `--require-registered-machines`, that it is registered), the record decoded from
+/// `format` with the query parameters `q`, its tachometer.
+pub async fn prepare(
+    app: &AppState,
+    machine_id: &str,
+    format: BodyFormat,
+    q: RecordQuery,
+    bytes: &[u8],
+    clock: &mut StageClock,
+) -> ApiResult<Prepared> {
+    let machine = app.store.get_machine(machine_id).await?;
+    crate::service::lifecycle::check_registered(app, machine_id, machine.as_ref())?;
+    clock.skip();
+    let pulses = tacho_name(machine.as_ref());
+    let dec = decode(format, &q, bytes, &app.settings.limits, Some(pulses))?;
+    let declared_healthy = q.baseline()?;
+    let tacho = tacho_of(machine.as_ref(), &dec, q.tacho_ppr()?)?;
+    clock.lap("decode");
+    Ok(Prepared {
+        machine,
+        dec,
+        request: RecordRequest {
+            channel: q.channel,
+            declared_healthy,
+            tacho,
+        },
+        warnings: Vec::new(),
+    })
+}
+
+/// What [`accept`] did with a record.
+pub enum Accepted {
+    /// Stored: the answer (the assessment with its ids) and the diagnosis's id.
+    Created {
+        response_text: String,
+        diagnosis_id: String,
+    },
+    /// A concurrent request with the same idempotency key committed first: its stored answer.
+    Replayed(IdemRow),
+}
+
+/// Assess a prepared record (off the async runtime, with the core's [`assess`]) and store it
+/// with its diagnosis, webhook deliveries and `idem`'s answer in one transaction; the record
+/// path every source shares.
+pub async fn accept(
+    app: &AppState,
+    machine_id: &str,
+    format: BodyFormat,
+    prepared: Prepared,
+    idem: &Idempotency,
+    mut clock: StageClock,
+) -> ApiResult<Accepted> {
+    let Prepared {
+        machine,
+        dec,
+        request,
+        warnings,
+    } = prepared;
+    let declared_healthy = request.declared_healthy;
+    let job = request.load(app, machine_id, machine, dec).await?;
+    let (dec, mut assessment, spectrum, job_clock) = tokio::task::spawn_blocking(move || job.run())
+        .await
+        .map_err(|e| ApiError::internal(format!("the diagnosis task failed: {e}")))?
+        .map_err(|e| problem_from_error(&e))?;
+    for note in warnings {
+        assessment.warn(note);
+    }
+    clock.absorb(job_clock);
+    clock.skip();
+
+    let ids = Ids {
+        now: now_ms(),
+        record_id: new_id(),
+        diagnosis_id: new_id(),
+    };
+    // Written once, straight from the typed assessment: the stored diagnosis, and the answer
+    // with the ids spliced in.
+    let body = serde_json::to_string(&assessment)
+        .map_err(|e| ApiError::internal(format!("the assessment did not serialise: {e}")))?;
+    let response_text = answer(&body, &ids, machine_id, assessment.level());
+    let mut ing = Ingest {
+        record: record_row(
+            app,
+            &dec,
+            &assessment,
+            &ids,
+            machine_id,
+            format,
+            idem,
+            declared_healthy,
+        ),
+        diagnosis: diagnosis_row(
+            &assessment,
+            body,
+            spectrum.as_ref(),
+            &ids,
+            machine_id,
+            measured_at(&dec, &ids),
+        ),
+        idempotency: idem.row(&response_text),
+        event_extras: event_extras(&assessment),
+        registered_only: app.settings.require_registered_machines,
+        alert: Some(AlertInput {
+            severity: assessment.severity(&app.settings.thresholds),
+            measured_at: measured_at(&dec, &ids),
+            policy: app.settings.alerts,
+        }),
+    };
+    // The webhook payloads carry the machine's wear trend with this record in it: a read of
+    // the history and a bootstrapped fit (≈ 10 ms of CPU at 200 points), so only when a
+    // webhook will receive a diagnosis payload.
+    if crate::service::trend::payloads_wanted(app).await {
+        let trend = crate::service::trend::summary_with(app, &ing.diagnosis).await;
+        ing.event_extras.insert("trend_summary".into(), trend);
+    }
+    clock.lap("assemble");
+    if let Some(prev) = store(app, ing, idem).await? {
+        return Ok(Accepted::Replayed(prev));
+    }
+    app.metrics.records_accepted.fetch_add(1, Ordering::Relaxed);
+    app.metrics.stages(&clock);
+    app.webhook_wake.notify_one();
+    let ea = assessment.wear().map(|w| w.estimate);
+    tracing::info!(machine = machine_id, diagnosis = %ids.diagnosis_id, ea, alert_level = %assessment.level(), "record accepted");
+    Ok(Accepted::Created {
+        response_text,
+        diagnosis_id: ids.diagnosis_id,
+    })
+}
+
+/// The store calls of one accepted record: its rows in one transaction (the group-commit
+/// queue); `Some(answer)` when a concurrent request with the same idempotency key committed
+/// first (its stored answer).
+async fn store(app: &AppState, ing: Ingest, idem: &Idempotency) -> ApiResult<Option<IdemRow>> {
+    match app.ingest_queue.ingest(ing).await {
+        Ok(()) => Ok(None),
+        Err(StoreError::Conflict(_)) if idem.key.is_some() => match idem.stored(app).await? {
+            Some(prev) => Ok(Some(prev)),
+            None => Err(ApiError::internal(
+                "idempotency conflict without a stored answer",
+            )),
+        },
+        Err(e) => Err(e.into()),
+    }
+}
+
+/// The name of the channel that is the machine's tachometer when a record has it: the
+/// machine's `tacho_channel`, else [`DEFAULT_TACHO_CHANNEL`].
+pub(super) fn tacho_name(machine: Option<&MachineRow>) -> &str {
+    machine
+        .and_then(|m| m.tacho_channel.as_deref())
+        .unwrap_or(DEFAULT_TACHO_CHANNEL)
+}
+
+/// The record's tachometer: the machine's `tacho_channel` (the record must have it), else a
+/// channel named [`DEFAULT_TACHO_CHANNEL`] if the record has one; pulses per revolution from
+/// `?tacho_ppr=`, else the machine's `tacho_ppr`.
+pub(super) fn tacho_of(
+    machine: Option<&MachineRow>,
+    dec: &Decoded,
+    ppr: Option<usize>,
+) -> ApiResult<Option<TachoChannel>> {
+    let name = tacho_name(machine);
+    let configured = machine.is_some_and(|m| m.tacho_channel.is_some());
+    let has = dec.channels.iter().any(|(n, _)| n == name);
+    if configured && !has {
+        let names: Vec<String> = dec.channels.iter().map(|(n, _)| format!("`{n}`")).collect();
+        return Err(ApiError::unprocessable(
+            "missing-tacho-channel",
+            "Tachometer channel missing",
+            format!(
+                "the machine's tachometer channel `{name}` is not in the record (its channels: \
+                 {}); send the tachometer's samples as channel `{name}`, or change the \
+                 machine's `tacho_channel` (PUT /v1/machines/{{machine_id}})",
+                names.join(", ")
+            ),
+        )
+        .with("tacho_channel", name));
+    }
+    if !has {
+        if ppr.is_some() {
+            return Err(ApiError::unprocessable(
+                "missing-tacho-channel",
+                "Tachometer channel missing",
+                format!(
+                    "`tacho_ppr` was given but the record has no tachometer channel (a channel \
+                     named `{name}`, or the machine's `tacho_channel`)"
+                ),
+            )
+            .with("tacho_channel", name));
+        }
+        return Ok(None);
+    }
+    let machine_ppr = machine.map_or(1, |m| m.tacho_ppr.max(1) as usize);
+    Ok(Some(TachoChannel {
+        name: name.to_string(),
+        pulses_per_rev: ppr.unwrap_or(machine_ppr),
+    }))
+}
+
+/// What the request says about the record besides its samples.
+struct RecordRequest {
+    /// `?channel=`.
+    channel: Option<String>,
+    /// Posted with `?baseline=true`.
+    declared_healthy: bool,
+    tacho: Option<TachoChannel>,
+}
+
+/// Everything the blocking part of an ingest needs: the decoded record, the chosen channels
+/// and the machine's context (gearbox, table, baseline, calibration).
+struct AssessJob {
+    dec: Decoded,
+    chosen: Vec<usize>,
+    ctx: MachineContext,
+    calibration: Option<MachineCalibration>,
+    baselines: Arc<Baselines>,
+    thresholds: Thresholds,
+    /// Posted with `?baseline=true`.
+    declared_healthy: bool,
+    tacho: Option<TachoChannel>,
+    /// The machine's declared units and ISO class.
+    units: MachineUnits,
+}
+
+type JobResult = (Decoded, Assessment, Option<PlotSpectrum>, StageClock);
+
+impl RecordRequest {
+    /// The machine's gearbox (and its table, when ready), baseline and calibration, and the
+    /// channels to assess (never the tachometer's).
+    async fn load(
+        self,
+        app: &AppState,
+        machine_id: &str,
+        machine: Option<MachineRow>,
+        dec: Decoded,
+    ) -> ApiResult<AssessJob> {
+        let ctx = crate::service::machines::context_of(app, machine_id, machine).await?;
+        let tacho_index = self
+            .tacho
+            .as_ref()
+            .and_then(|t| dec.channels.iter().position(|(n, _)| *n == t.name));
+        let chosen = dec.select(
+            self.channel.as_deref(),
+            ctx.machine.as_ref().and_then(|m| m.channels.as_deref()),
+            tacho_index,
+        )?;
+        let units = crate::service::units::machine_units(ctx.machine.as_ref())?;
+        let baselines =
+            crate::service::machines::baselines(app, ctx.machine.as_ref(), &ctx.gearbox_row.hash)
+                .await?;
+        let calibration = app
+            .store
+            .get_calibration(machine_id)
+            .await?
+            .map(|c| calibration_of(&c));
+        Ok(AssessJob {
+            dec,
+            chosen,
+            ctx,
+            calibration,
+            baselines,
+            thresholds: app.settings.thresholds,
+            declared_healthy: self.declared_healthy,
+            tacho: self.tacho,
+            units,
+        })
+    }
+}
+
+impl AssessJob {
+    /// The assessment (timed by stage) and the spectrum plot of the deciding channel.
+    fn run(mut self) -> crate::Result<JobResult> {
+        let mut clock = StageClock::new();
+        let facts = RecordFacts {
+            sample_rate_hz: self.dec.sample_rate_hz,
+            shaft_hz: self.dec.shaft_hz,
+            sensor: self.dec.sensor.clone(),
+            declared_healthy: self.declared_healthy,
+            load: self.dec.load.clone(),
+            tacho: self.tacho.clone(),
+        };
+        let ctx = &self.ctx;
+        let diagnoser: Option<&TableDiagnoser> = ctx.diagnoser.as_deref();
+        let machine = Machine {
+            gearbox: &ctx.gearbox,
+            gearbox_ref: ctx.gearbox_ref(),
+            described: ctx.machine.as_ref().is_some_and(|m| m.gearbox_id.is_some()),
+            diagnoser,
+            table_note: ctx.table_note(),
+            input_shaft_hz: ctx.input_shaft_hz(),
+            baselines: &self.baselines.pooled,
+            state_baselines: &self.baselines.states,
+            baseline_counts: &self.baselines.counts,
+            calibration: self.calibration.as_ref(),
+            thresholds: self.thresholds,
+            units: std::mem::take(&mut self.units),
+        };
+        let a = assess(
+            &mut self.dec.channels,
+            &self.chosen,
+            &facts,
+            &machine,
+            &mut |stage| clock.lap(stage),
+        )?;
+        let samples = &self.dec.channels[self.chosen[a.deciding]].1;
+        let spectrum = plot(&a, samples, &facts, &ctx.gearbox, ctx.input_shaft_hz());
+        clock.lap("plot");
+        Ok((self.dec, a, spectrum, clock))
+    }
+}
+
+/// A stored calibration as the assessment holds it.
+pub fn calibration_of(c: &crate::store::CalibrationRow) -> MachineCalibration {
+    MachineCalibration {
+        id: c.id.clone(),
+        calibrated_at: crate::time::rfc3339(c.created_at),
+        effects: serde_json::from_str(&c.effects).unwrap_or(serde_json::Value::Array(vec![])),
+    }
+}
+
+/// The spectrum plot of the deciding channel: from the spectrum its diagnosis computed when it
+/// has one, else from its samples.
+fn plot(
+    a: &Assessment,
+    samples: &[f64],
+    facts: &RecordFacts,
+    gearbox: &Arc<Gearbox>,
+    input_shaft_hz: Option<f64>,
+) -> Option<PlotSpectrum> {
+    let fs = facts.sample_rate_hz;
+    match &a.deciding_channel().reading {
+        Some(r) => {
+            let f1 = r.diagnosis.f1_hz;
+            match &r.spectrum {
+                Some(s) => plot_from_spectrum(s, f1, &r.marks()),
+                None => plot_spectrum(samples, fs, f1, &r.marks()),
+            }
+        }
+        None => {
+            let f1 = input_shaft_hz.map(|h| gearbox.f1_hz(h)).unwrap_or(f64::NAN);
+            plot_spectrum(samples, fs, f1, &[])
+        }
+    }
+}
