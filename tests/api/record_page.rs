@@ -153,6 +153,13 @@ async fn the_record_page_shows_the_evidence() {
         .await;
     assert_eq!(refs, json!(1), "the healthy reference is drawn beneath");
 
+    // Which gears make each mesh, in words.
+    let key = d.script("return $('record-meshes').textContent").await;
+    assert_eq!(
+        key,
+        json!("GM1: in 16T / idler 48T; GM2: idler 24T / out 40T"),
+        "the meshes' key"
+    );
     // Every order: the mesh harmonics are labelled, by stage.
     let all = marks(&d, "record-orders").await;
     assert!(shown(&all, "mesh", |l| l.contains("GM1 ×1")), "{all:?}");

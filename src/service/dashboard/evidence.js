@@ -208,6 +208,15 @@ function drawEvidence() {
   $("record-findings").querySelectorAll("li.finding").forEach((li, i) => li.classList.toggle("selected", i === selected));
 }
 
+/** Which gears make each mesh, from the mesh lines' parts: "GM1: in 16T / idler 48T; …". */
+function meshKey(plot) {
+  const stages = new Map();
+  for (const l of plot.lines.filter((l) => l.kind === "mesh")) {
+    for (const m of l.part.matchAll(/mesh (\d+) \(([^)]*)\)/g)) stages.set(+m[1], m[2]);
+  }
+  return [...stages.keys()].sort((a, b) => a - b).map((k) => "GM" + k + ": " + stages.get(k)).join("; ");
+}
+
 /** The zoom buttons: every order, the shafts' lines, each mesh harmonic's region. */
 function zoomButtons(plot) {
   const box = $("record-zoom");
@@ -268,6 +277,7 @@ function renderEvidence(r) {
   if (!plot) return;
   evidenceView = { r, zoom: null, selected: null };
   $("record-orders-caption").textContent = "channel " + plot.channel + ", " + plot.revolutions + " input revolutions resampled to the shaft's measured angle";
+  $("record-meshes").textContent = meshKey(plot);
   zoomButtons(plot);
   drawEvidence();
 }
