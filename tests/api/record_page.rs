@@ -242,6 +242,7 @@ async fn the_record_page_shows_the_evidence() {
     d.script("$('record-evidence').scrollIntoView(); return true;")
         .await;
     screenshot(&d, "record-evidence.png").await;
+    d.cmd(reqwest::Method::DELETE, "", None).await;
 }
 
 /// The page as PNG (WebDriver `GET /screenshot`) under `GEARWEAR_SCREENSHOT_DIR`, else
