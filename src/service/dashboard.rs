@@ -2,7 +2,8 @@
 //! JSON API. The script is written as several files, one per view (`common.js`: the API call,
 //! builders, formatting and the time axis; `charts.js`: the machine page's charts;
 //! `planner.js`: the fleet by urgency and the open alerts; `projection.js`: the wear trend
-//! with its projected crossings; `diagnosis.js`: one record's diagnosis; `app.js`: routes and
+//! with its projected crossings; `evidence.js`: a record's spectra with the lines its findings
+//! rest on; `diagnosis.js`: one record's diagnosis; `app.js`: routes and
 //! polling), served as one `/app.js` in that order. The page itself holds no data; its API calls need a read key (asked for on a 401, kept in the
 //! browser's sessionStorage for the tab's life, sent as `Authorization: Bearer`) unless the
 //! operator started the service with `--dashboard-without-key`.
@@ -19,6 +20,8 @@ const APP_JS: &str = concat!(
     include_str!("dashboard/planner.js"),
     "\n",
     include_str!("dashboard/projection.js"),
+    "\n",
+    include_str!("dashboard/evidence.js"),
     "\n",
     include_str!("dashboard/diagnosis.js"),
     "\n",

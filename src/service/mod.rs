@@ -28,6 +28,7 @@ pub mod calibration;
 pub mod cli;
 pub mod dashboard;
 pub mod error;
+pub mod evidence;
 pub mod gearboxes;
 pub mod health;
 pub mod http;

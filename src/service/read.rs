@@ -234,7 +234,7 @@ pub async fn get_diagnosis(
         )
         .with("diagnosis_id", id.as_str())
     })?;
-    Ok(diagnosis_view(&headers, &d))
+    diagnosis_view(&app, &headers, &d).await
 }
 
 /// One record's diagnosis, by the record's id (a deep link from an alert or a trend point,
@@ -256,13 +256,19 @@ pub async fn get_record(
         )
         .with("record_id", id.as_str())
     })?;
-    Ok(diagnosis_view(&headers, &d))
+    diagnosis_view(&app, &headers, &d).await
 }
 
-/// A stored diagnosis with its full body and spectrum, ETagged.
-fn diagnosis_view(headers: &HeaderMap, d: &DiagnosisRow) -> Response {
+/// A stored diagnosis with its full body, spectrum and evidence (with its healthy
+/// reference), ETagged.
+async fn diagnosis_view(
+    app: &AppState,
+    headers: &HeaderMap,
+    d: &DiagnosisRow,
+) -> ApiResult<Response> {
     let mut body = diagnosis_summary(d);
     body["diagnosis"] = serde_json::from_str(&d.body).unwrap_or(Value::Null);
     body["spectrum"] = serde_json::from_str(&d.spectrum).unwrap_or(Value::Null);
-    json_with_etag(headers, &body)
+    body["evidence"] = super::evidence::evidence_of(app, d).await?;
+    Ok(json_with_etag(headers, &body))
 }

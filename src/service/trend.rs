@@ -265,7 +265,7 @@ pub async fn summary_with(app: &AppState, d: &DiagnosisRow) -> Value {
     };
     let at = rows.partition_point(|r| r.measured_at <= d.measured_at);
     let mut row = d.clone();
-    (row.body, row.spectrum) = (String::new(), String::new());
+    (row.body, row.spectrum, row.evidence) = (String::new(), String::new(), String::new());
     rows.insert(at, row);
     if rows.len() > SERIES_POINTS as usize {
         rows.remove(0);

@@ -32,7 +32,7 @@ fn write_csv(path: &Path, input_hz: f64, seed: u64, damaged: bool) {
     std::fs::write(path, s).unwrap();
 }
 
-async fn post(app: &TestApp, query: &str, body: &Value) -> Value {
+pub(crate) async fn post(app: &TestApp, query: &str, body: &Value) -> Value {
     let r = app
         .client
         .post(app.url(&format!("/v1/machines/gb/records{query}")))

@@ -25,7 +25,7 @@ both_stores!(
 const SPUR: &str = include_str!("../../configs/gearboxes/spur-pair.toml");
 const TWO_STAGE: &str = include_str!("../../configs/gearboxes/two-stage-parallel.toml");
 
-async fn put_gearbox(app: &TestApp, id: &str, key: &str, text: &str) -> (u16, Value) {
+pub(crate) async fn put_gearbox(app: &TestApp, id: &str, key: &str, text: &str) -> (u16, Value) {
     let (s, _, body) = checked(
         app.client
             .put(app.url(&format!("/v1/gearboxes/{id}")))

@@ -19,6 +19,7 @@ mod openapi;
 mod operating_state;
 mod planner;
 mod quality_battery;
+mod record_page;
 mod security;
 mod store;
 mod trend;

@@ -291,6 +291,7 @@ pub fn ingest(machine: &str, idem: Option<&str>, t: i64) -> Ingest {
             motion_state: "period-1".into(),
             body: "{}".into(),
             spectrum: "null".into(),
+            evidence: "null".into(),
             has_wear: true,
             novelty_score: None,
             novelty_threshold: None,

@@ -4,7 +4,7 @@ use async_trait::async_trait;
 
 use super::StoreResult;
 
-/// A diagnosis; `body`/`spectrum` are JSON texts, empty in summaries.
+/// A diagnosis; `body`/`spectrum`/`evidence` are JSON texts, empty in summaries.
 #[derive(Debug, Clone)]
 pub struct DiagnosisRow {
     pub seq: i64,
@@ -19,6 +19,8 @@ pub struct DiagnosisRow {
     pub motion_state: String,
     pub body: String,
     pub spectrum: String,
+    /// The record page's evidence plot (the core's `EvidencePlot`), `null` without one.
+    pub evidence: String,
     /// False when the diagnosis has no wear degree (its gearbox's table was not ready).
     pub has_wear: bool,
     /// Novelty against the machine's baseline (deciding channel), when it has one.
@@ -84,7 +86,7 @@ macro_rules! diagnoses_sql {
             diagnosis_row_with(r, full, false)
         }
 
-        /// A row with its spectrum when `full`, with its body when `full` or `body`.
+        /// A row with its spectrum and evidence when `full`, with its body when `full` or `body`.
         fn diagnosis_row_with(
             r: &<$db as sqlx::Database>::Row,
             full: bool,
@@ -108,6 +110,11 @@ macro_rules! diagnoses_sql {
                 },
                 spectrum: if full {
                     r.try_get("spectrum")?
+                } else {
+                    String::new()
+                },
+                evidence: if full {
+                    r.try_get("evidence")?
                 } else {
                     String::new()
                 },

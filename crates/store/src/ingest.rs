@@ -147,8 +147,9 @@ macro_rules! ingest_sql {
             sqlx::query(
                 "INSERT INTO diagnoses (id, record_id, machine_id, created_at, ea_estimate, \
                  ea_lower, ea_upper, alert_level, motion_state, body, spectrum, has_wear, \
-                 novelty_score, novelty_threshold, channel, measured_at) \
-                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, $16)",
+                 novelty_score, novelty_threshold, channel, measured_at, evidence) \
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, $16, \
+                 $17)",
             )
             .bind(&d.id)
             .bind(&d.record_id)
@@ -166,6 +167,7 @@ macro_rules! ingest_sql {
             .bind(d.novelty_threshold)
             .bind(&d.channel)
             .bind(d.measured_at)
+            .bind(&d.evidence)
             .execute(&mut **tx)
             .await?;
             sqlx::query(

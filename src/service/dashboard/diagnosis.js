@@ -4,7 +4,7 @@
 
 let recordDrawn = "";
 
-/** The diagnosis answer (`{id, machine_id, record_id, created_at, …, diagnosis, spectrum}`) drawn. */
+/** The diagnosis answer (`{id, machine_id, record_id, created_at, …, diagnosis, spectrum, evidence}`) drawn. */
 function renderRecord(r) {
   const d = r.diagnosis || {};
   $("record-missing").hidden = true;
@@ -35,7 +35,7 @@ function renderRecord(r) {
   for (const p of figureParts(d).filter((p) => !p.cls.startsWith("wear"))) fact(p.cls.startsWith("velocity") ? "Velocity" : "Acceleration", p.text, p.cls);
   const n = r.novelty;
   fact("Novelty", n && num(n.score) ? n.score.toFixed(2) + " (threshold " + fmt(n.threshold, 2) + ")" : "no baseline");
-  fact("Speed", speedText(d));
+  evidenceFacts(d, fact);
   fact("Motion state", r.motion_state || "–");
   fact("Diagnosis id", r.id, "ids");
   fact("Record id", r.record_id, "ids");
@@ -48,6 +48,7 @@ function renderRecord(r) {
     h("span", { class: "kind" }, li, (f.kind || "") + (num(f.strength) ? ", strength " + f.strength.toFixed(1) : ""));
   }
   if (!fs.length) h("li", { class: "muted none" }, ol, "none: the record does not depart from a baseline at its speed and load (or the machine has none)");
+  renderEvidence(r);
   renderSpectrum({ spectrum: r.spectrum }, $("record-spectrum"));
 }
 

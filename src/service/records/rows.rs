@@ -131,6 +131,7 @@ pub(super) fn diagnosis_row(
         motion_state: motion,
         body,
         spectrum: serde_json::to_string(&spectrum).unwrap_or_else(|_| "null".into()),
+        evidence: serde_json::to_string(&a.evidence_plot).unwrap_or_else(|_| "null".into()),
         has_wear: wear.is_some(),
         novelty_score: decide.novelty.as_ref().map(|n| n.score),
         novelty_threshold: decide.novelty.as_ref().map(|n| n.threshold),

@@ -46,7 +46,7 @@ pub use level::{Basis, Level};
 pub use quality::Quality;
 pub use stored::{STORED_FEATURES_VERSION, StoredChannel, StoredFeatures};
 
-use crate::condition::{Finding, Load, OperatingState, StateBaseline};
+use crate::condition::{EvidencePlot, Finding, Load, OperatingState, StateBaseline, evidence_plot};
 use crate::diagnosis::{Diagnosis, Fit, WearDegree};
 use crate::gearbox::Gearbox;
 use crate::novelty::{
@@ -246,6 +246,10 @@ pub struct Assessment {
     /// Index in `assessed` of the channel that decides.
     #[serde(skip)]
     pub deciding: usize,
+    /// The deciding channel's order and envelope spectra with the lines its evidence reads
+    /// (a described gearbox with a measured speed only): what the record page draws.
+    #[serde(skip)]
+    pub evidence_plot: Option<EvidencePlot>,
 }
 
 impl Assessment {
@@ -348,7 +352,15 @@ fn assess_inspected(
         }
         assessed.push(a);
     }
-    Ok(assemble(assessed, facts, machine, measured, quality, setup))
+    let mut a = assemble(assessed, facts, machine, &measured, quality, setup);
+    a.evidence_plot = match (&measured.angle, &measured.parts) {
+        (Some(angle), Some(parts)) => {
+            let (name, x) = &channels[chosen[a.deciding]];
+            evidence_plot(name, x, facts.sample_rate_hz, angle, parts).ok()
+        }
+        _ => None,
+    };
+    Ok(a)
 }
 
 /// The features of a record's chosen channels exactly as its assessment computes them — what
@@ -543,7 +555,7 @@ fn assemble(
     assessed: Vec<ChannelAssessment>,
     facts: &RecordFacts,
     machine: &Machine,
-    measured: Measured,
+    measured: &Measured,
     quality: Quality,
     setup: setup::Setup,
 ) -> Assessment {
@@ -578,8 +590,8 @@ fn assemble(
         channels: (assessed.len() > 1)
             .then(|| assessed.iter().map(ChannelAssessment::summary).collect()),
         gearbox: machine.gearbox_ref.clone(),
-        operating_state: measured.state,
-        state_note: measured.note,
+        operating_state: measured.state.clone(),
+        state_note: measured.note.clone(),
         findings: decide.findings.clone(),
         novelty: decide.novelty.clone(),
         state_reference: decide.state.clone(),
@@ -599,5 +611,6 @@ fn assemble(
         setup,
         deciding: di,
         assessed,
+        evidence_plot: None,
     }
 }

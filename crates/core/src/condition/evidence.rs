@@ -43,7 +43,7 @@ use crate::signal::{PlanCache, Spectrum, Window, amplitude_spectrum, kurtosis, r
 /// Highest order kept, relative to the record's Nyquist order.
 const NYQUIST_SHARE: f64 = 0.9;
 /// Relative tolerance of a bearing line (its rolling elements slip).
-const BEARING_SLIP: f64 = 0.01;
+pub(super) const BEARING_SLIP: f64 = 0.01;
 /// Version of the features' definitions: a baseline fits only records of its own version.
 pub const EVIDENCE_VERSION: u32 = 2;
 
@@ -140,36 +140,54 @@ pub fn evidence(
     order: Option<&OrderAnalysis>,
 ) -> Result<Evidence> {
     let map = LineMap::of(parts);
-    let f_in = angle.summary.mean_hz;
-    let p = samples_per_rev_for(fs, f_in);
-    let max_order = NYQUIST_SHARE * 0.5 * fs / f_in;
-    let mut res = angular_resample(x, angle, 1.0, p)?;
-    let mut layout = map.layout(res.revolutions);
-    if layout.periods.is_none() {
-        layout.revolutions = smooth_revolutions(res.revolutions);
-    }
-    res.samples.truncate(layout.revolutions * p);
-    let mut values = angular_features(&res.samples, p, &layout, &map, parts, max_order)?;
+    let Angular {
+        samples,
+        p,
+        layout,
+        max_order,
+    } = Angular::of(x, fs, angle, &map)?;
+    let mut values = angular_features(&samples, p, &layout, &map, parts, max_order)?;
     if let Some(a) = order {
         tsa_features(a, &mut values);
     }
     stat_features(x, &mut values);
-    let spread = spread(
-        x,
-        fs,
-        angle,
-        &res.samples,
-        p,
-        &layout,
-        &map,
-        parts,
-        max_order,
-    )?;
+    let spread = spread(x, fs, angle, &samples, p, &layout, &map, parts, max_order)?;
     Ok(Evidence {
         values,
         spread,
         note: map.resolution_note(&layout),
     })
+}
+
+/// A record resampled to the input shaft's angle as the evidence reads it: `p` samples per
+/// revolution over the [`Layout`]'s revolutions, and the highest order kept.
+pub(super) struct Angular {
+    pub samples: Vec<f64>,
+    pub p: usize,
+    pub layout: Layout,
+    pub max_order: f64,
+}
+
+impl Angular {
+    /// `x` sampled at `fs`, resampled from the input shaft's measured `angle` over a whole
+    /// number of common periods of `map` (or a 2-3-5-smooth number of revolutions).
+    pub fn of(x: &[f64], fs: f64, angle: &ShaftAngle, map: &LineMap) -> Result<Angular> {
+        let f_in = angle.summary.mean_hz;
+        let p = samples_per_rev_for(fs, f_in);
+        let max_order = NYQUIST_SHARE * 0.5 * fs / f_in;
+        let mut res = angular_resample(x, angle, 1.0, p)?;
+        let mut layout = map.layout(res.revolutions);
+        if layout.periods.is_none() {
+            layout.revolutions = smooth_revolutions(res.revolutions);
+        }
+        res.samples.truncate(layout.revolutions * p);
+        Ok(Angular {
+            samples: res.samples,
+            p,
+            layout,
+            max_order,
+        })
+    }
 }
 
 /// Segments a record's repeatability is measured on: quarters, each a whole number of
@@ -347,9 +365,17 @@ fn stat_features(x: &[f64], out: &mut BTreeMap<String, f64>) {
     }
 }
 
+/// The lower edge (orders) of the envelope band: just above the mesh regions; `None` when
+/// that leaves no band below `max_order`.
+pub(super) fn envelope_band(map: &LineMap, max_order: f64) -> Option<f64> {
+    let top_mesh = map.meshes.iter().fold(0.0f64, |a, &b| a.max(b));
+    let lo = (super::lines::MESH_REGION_ORDERS + 0.5) * top_mesh;
+    (lo < 0.5 * max_order).then_some(lo)
+}
+
 /// The envelope of `x` (samples in the input shaft's angle, `p` per revolution) in the band
 /// `lo..hi` (orders): the magnitude of the band's analytic signal.
-fn envelope(x: &[f64], p: usize, lo: f64, hi: f64) -> Vec<f64> {
+pub(super) fn envelope(x: &[f64], p: usize, lo: f64, hi: f64) -> Vec<f64> {
     let n = x.len();
     let mut buf: Vec<Complex64> = x.iter().map(|&v| Complex64::new(v, 0.0)).collect();
     PlanCache::global().complex(n, false).process(&mut buf);
@@ -378,11 +404,9 @@ fn envelope_features(
     max_order: f64,
     out: &mut BTreeMap<String, f64>,
 ) -> Result<()> {
-    let top_mesh = map.meshes.iter().fold(0.0f64, |a, &b| a.max(b));
-    let lo = (super::lines::MESH_REGION_ORDERS + 0.5) * top_mesh;
-    if !(lo < 0.5 * max_order) {
+    let Some(lo) = envelope_band(map, max_order) else {
         return Ok(());
-    }
+    };
     let mut env = envelope(x, p, lo, max_order);
     if let Some(v) = ln(rms(&env)) {
         out.insert("env.level".into(), v);
@@ -425,13 +449,13 @@ fn envelope_features(
 }
 
 /// A bearing's defect lines: bearing, defect, shaft, orders of harmonics 1..3.
-type BearingLine = (String, &'static str, String, Vec<f64>);
+pub(super) type BearingLine = (String, &'static str, String, Vec<f64>);
 
 /// Every described bearing's defect lines in input-shaft orders; the ball line is read at
 /// 2 × BSF (a ball defect strikes both races once per spin). The cage's own frequency (FTF,
 /// ≈ 0.4 × the shaft rate) is not read: it sits among the shafts' first lines, within the
 /// rolling elements' slip of them, and a cage defect shows as a modulation of the other lines.
-fn bearing_lines(parts: &Parts) -> Vec<BearingLine> {
+pub(super) fn bearing_lines(parts: &Parts) -> Vec<BearingLine> {
     let mut v = Vec::new();
     for b in &parts.bearings {
         let rs = parts.shafts.get(&b.shaft).copied().unwrap_or(0.0);

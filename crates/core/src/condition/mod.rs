@@ -11,6 +11,7 @@
 //!    with what they expect at its state, scaled by the repeatability of a state.
 //! 5. [`explain`], [`candidates`] and [`findings`]: which part's predicted change explains the
 //!    record's change, and how much of it.
+//! 6. [`plot`]: the order and envelope spectra with the lines the findings rest on, for people.
 
 pub mod baseline;
 pub mod calibration;
@@ -20,6 +21,7 @@ pub mod explain;
 pub mod findings;
 pub mod lines;
 pub mod parts;
+pub mod plot;
 pub mod setup;
 pub mod state;
 pub mod synchronous;
@@ -30,4 +32,5 @@ pub use baseline::{Coverage, StateBaseline, StateRecord, StateScore};
 pub use evidence::{EVIDENCE_VERSION, Evidence, evidence};
 pub use findings::{Finding, findings};
 pub use parts::Parts;
+pub use plot::{EvidencePlot, evidence_plot};
 pub use state::{Load, OperatingState, SpeedSource, Tacho, measure};
