@@ -30,3 +30,12 @@ pub mod keys;
 pub mod service;
 pub mod telemetry;
 pub mod views;
+
+/// The async runtime the CLI's store calls and `serve` run on.
+pub fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    use anyhow::Context;
+    tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")
+}

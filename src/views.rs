@@ -3,8 +3,9 @@
 
 use serde_json::{Map, Value, json};
 
+use crate::gearbox::Gearbox;
 use crate::store::events::{DiagnosisEvent, Event, QueuedEvent};
-use crate::store::{AlertEventRow, AlertRow, DiagnosisRow};
+use crate::store::{AlertEventRow, AlertRow, DiagnosisRow, GearboxRow};
 use crate::time::rfc3339;
 
 /// An episode (without its audit trail).
@@ -57,6 +58,40 @@ fn novelty(score: Option<f64>, threshold: Option<f64>) -> Value {
         (Some(s), Some(t)) => json!({"score": s, "threshold": t, "anomalous": s > t}),
         _ => Value::Null,
     }
+}
+
+/// A gearbox: its row, and with `full` its resolved description, kinematics and warnings.
+pub fn gearbox_json(row: &GearboxRow, gb: Option<&Gearbox>, full: bool) -> Value {
+    let mut v = json!({
+        "id": row.id,
+        "name": row.name,
+        "builtin": row.builtin,
+        "hash": row.hash,
+        "status": row.status,
+        "progress": row.progress,
+        "error": row.error,
+        "attempts": row.attempts,
+        "created_at": rfc3339(row.created_at),
+        "updated_at": rfc3339(row.updated_at),
+        "started_at": row.started_at.map(rfc3339),
+        "finished_at": row.finished_at.map(rfc3339),
+    });
+    if let (true, Some(gb)) = (full, gb) {
+        let nominal = gb.description.nominal_input_hz;
+        v["description"] = serde_json::to_value(&gb.description).unwrap_or(Value::Null);
+        v["source_format"] = row.source_format.clone().into();
+        v["nominal_input_hz"] = json!(nominal);
+        v["kinematics"] = json!({
+            "input_hz": nominal.unwrap_or(1.0),
+            "per_input_hz": nominal.is_none(),
+            "rates": serde_json::to_value(gb.kinematics(nominal.unwrap_or(1.0))).unwrap_or(Value::Null),
+        });
+        v["reference_frequency_hz"] = json!(gb.reference_frequency_hz());
+        v["dynamics_estimated"] = json!(gb.dynamics_estimated());
+        v["assumed"] = serde_json::to_value(&gb.assumed).unwrap_or(Value::Null);
+        v["warnings"] = json!(gb.warnings);
+    }
+    v
 }
 
 /// The payload a delivery sends: its queued event rendered, or (queued already rendered by

@@ -52,7 +52,7 @@ pub enum AlertsCommand {
 
 pub fn run(a: AlertsArgs) -> Result<()> {
     let db = a.store.resolve()?;
-    crate::service::cli::runtime()?.block_on(async move {
+    crate::runtime()?.block_on(async move {
         let st = db.open().await?;
         let r = match a.command {
             AlertsCommand::List {

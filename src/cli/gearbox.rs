@@ -67,7 +67,7 @@ pub struct ShowArgs {
 }
 
 fn open_store(db: &Database) -> Result<std::sync::Arc<dyn crate::store::Store>> {
-    crate::service::cli::runtime()?.block_on(db.open())
+    crate::runtime()?.block_on(db.open())
 }
 
 /// `gearwear gearbox …`.
@@ -107,9 +107,9 @@ pub fn run(a: GearboxArgs) -> Result<()> {
             if id == crate::machine::BUILTIN_GEARBOX_ID {
                 bail!("`{id}` is the built-in paper rig; choose another --id");
             }
-            let (row, _) = crate::service::gearboxes::gearbox_row(&id, &text, fmt, &origin)?;
+            let (row, _) = crate::store::GearboxRow::described(&id, &text, fmt, &origin)?;
             let db = a.store.resolve()?;
-            let rt = crate::service::cli::runtime()?;
+            let rt = crate::runtime()?;
             let outcome = rt.block_on(async {
                 let st = db.open().await?;
                 let o = st.put_gearbox(&row).await?;
@@ -133,10 +133,10 @@ pub fn run(a: GearboxArgs) -> Result<()> {
         }
         GearboxCommand::List(a) => {
             let st = open_store(&a.resolve()?)?;
-            let rows = crate::service::cli::runtime()?.block_on(st.list_gearboxes())?;
+            let rows = crate::runtime()?.block_on(st.list_gearboxes())?;
             let v: Vec<_> = rows
                 .iter()
-                .map(|r| crate::service::gearboxes::view(r, None, false))
+                .map(|r| crate::views::gearbox_json(r, None, false))
                 .collect();
             println!("{}", serde_json::to_string_pretty(&v)?);
         }
@@ -144,7 +144,7 @@ pub fn run(a: GearboxArgs) -> Result<()> {
             let id = s.id.unwrap_or_default();
             let db = s.store.resolve()?;
             let st = open_store(&db)?;
-            let Some(row) = crate::service::cli::runtime()?.block_on(st.get_gearbox(&id))? else {
+            let Some(row) = crate::runtime()?.block_on(st.get_gearbox(&id))? else {
                 bail!(
                     "no gearbox `{id}` in {}; add it with `gearwear gearbox add --gearbox FILE --id {id}`",
                     db.describe()
@@ -152,7 +152,7 @@ pub fn run(a: GearboxArgs) -> Result<()> {
             };
             let d: crate::gearbox::GearboxDescription = serde_json::from_str(&row.description)?;
             let gb = crate::gearbox::Gearbox::new(d)?;
-            let v = crate::service::gearboxes::view(&row, Some(&gb), true);
+            let v = crate::views::gearbox_json(&row, Some(&gb), true);
             println!("{}", serde_json::to_string_pretty(&v)?);
         }
         GearboxCommand::Show(s) => {

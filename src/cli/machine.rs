@@ -85,7 +85,7 @@ fn check_id(id: &str) -> Result<()> {
 fn delete(d: DeleteArgs) -> Result<()> {
     check_id(&d.id)?;
     let db = d.store.resolve()?;
-    crate::service::cli::runtime()?.block_on(async move {
+    crate::runtime()?.block_on(async move {
         let st = db.open().await?;
         let gone = st.delete_machine(&d.id, now_ms()).await?;
         st.close().await;
@@ -137,7 +137,7 @@ fn set(s: SetArgs) -> Result<()> {
         .units
         .check(s.channels.as_deref(), s.tacho_channel.as_deref())?;
     let db = s.store.resolve()?;
-    crate::service::cli::runtime()?.block_on(async move {
+    crate::runtime()?.block_on(async move {
         let st = db.open().await?;
         if s.gearbox != BUILTIN_ID && st.get_gearbox(&s.gearbox).await?.is_none() {
             bail!(

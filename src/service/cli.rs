@@ -205,14 +205,6 @@ pub enum KeysCommand {
     Revoke { id: String },
 }
 
-/// A runtime for the commands that talk to the store.
-pub fn runtime() -> Result<tokio::runtime::Runtime> {
-    tokio::runtime::Builder::new_multi_thread()
-        .enable_all()
-        .build()
-        .context("starting the async runtime")
-}
-
 /// Create a key in a store; returns the full token (to show once).
 pub async fn create_key(
     store: &dyn store::Store,
@@ -234,7 +226,7 @@ pub async fn create_key(
 
 pub fn keys_cmd(a: KeysArgs) -> Result<()> {
     let db = a.database.resolve()?;
-    runtime()?.block_on(async move {
+    crate::runtime()?.block_on(async move {
         let store = db.open().await?;
         match a.command {
             KeysCommand::Create { scope, label } => {
@@ -288,7 +280,7 @@ pub fn serve_cmd(a: ServeArgs) -> Result<()> {
     let settings = a.settings()?;
     let a_allow_stale = a.allow_stale_table;
     crate::telemetry::init(settings.log_json);
-    runtime()?.block_on(async move {
+    crate::runtime()?.block_on(async move {
         let database = crate::database::describe(&settings.database_url);
         let store = store::connect(&settings.database_url)
             .await

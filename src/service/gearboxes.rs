@@ -26,7 +26,7 @@ use axum::body::Body;
 use axum::extract::{Path, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::Response;
-use serde_json::{Value, json};
+use serde_json::json;
 use tokio::sync::watch;
 
 use super::AppState;
@@ -41,7 +41,7 @@ use crate::keys::Scope;
 use crate::signature::precompute::{PrecomputeSpec, default_grid, partial_path, precompute};
 use crate::signature::{SignatureTable, SimulationSettings, TableStatus};
 use crate::store::{GearboxRow, PutOutcome, StoreError, new_id, now_ms};
-use crate::time::rfc3339;
+use crate::views::gearbox_json;
 
 /// Id of the built-in gearbox: the first paper's rig.
 pub const BUILTIN_ID: &str = crate::machine::BUILTIN_GEARBOX_ID;
@@ -51,47 +51,9 @@ const PROGRESS_EVERY: Duration = Duration::from_secs(1);
 /// How often an idle worker looks for a job (a PUT on this replica wakes it at once).
 const IDLE_POLL: Duration = Duration::from_secs(2);
 
-/// The stored row of a description: `(row, resolved)`.
-pub fn gearbox_row(
-    id: &str,
-    text: &str,
-    format: Option<TextFormat>,
-    origin: &str,
-) -> Result<(GearboxRow, Gearbox), crate::gearbox::GearboxError> {
-    let d = GearboxDescription::parse(text, format, origin)?;
-    let fmt = match format {
-        Some(TextFormat::Json) => "json",
-        Some(TextFormat::Toml) => "toml",
-        None if text.trim_start().starts_with('{') => "json",
-        None => "toml",
-    };
-    let gb = Gearbox::new(d)?;
-    let now = now_ms();
-    let row = GearboxRow {
-        id: id.to_string(),
-        name: gb.name().to_string(),
-        source: text.to_string(),
-        source_format: fmt.into(),
-        description: gb.description.canonical_json(),
-        hash: gb.hash.clone(),
-        builtin: false,
-        status: TableStatus::Queued,
-        progress: 0.0,
-        error: None,
-        claimed_by: None,
-        lease_until: 0,
-        attempts: 0,
-        created_at: now,
-        updated_at: now,
-        started_at: None,
-        finished_at: None,
-    };
-    Ok((row, gb))
-}
-
 /// Insert or refresh the built-in gearbox row (at start-up).
 pub async fn ensure_builtin(app: &AppState) -> Result<(), StoreError> {
-    let (mut row, _) = gearbox_row(
+    let (mut row, _) = GearboxRow::described(
         BUILTIN_ID,
         PAPER_RIG,
         Some(TextFormat::Toml),
@@ -164,40 +126,6 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
-/// The JSON view of a gearbox.
-pub fn view(row: &GearboxRow, gb: Option<&Gearbox>, full: bool) -> Value {
-    let mut v = json!({
-        "id": row.id,
-        "name": row.name,
-        "builtin": row.builtin,
-        "hash": row.hash,
-        "status": row.status,
-        "progress": row.progress,
-        "error": row.error,
-        "attempts": row.attempts,
-        "created_at": rfc3339(row.created_at),
-        "updated_at": rfc3339(row.updated_at),
-        "started_at": row.started_at.map(rfc3339),
-        "finished_at": row.finished_at.map(rfc3339),
-    });
-    if let (true, Some(gb)) = (full, gb) {
-        let nominal = gb.description.nominal_input_hz;
-        v["description"] = serde_json::to_value(&gb.description).unwrap_or(Value::Null);
-        v["source_format"] = row.source_format.clone().into();
-        v["nominal_input_hz"] = json!(nominal);
-        v["kinematics"] = json!({
-            "input_hz": nominal.unwrap_or(1.0),
-            "per_input_hz": nominal.is_none(),
-            "rates": serde_json::to_value(gb.kinematics(nominal.unwrap_or(1.0))).unwrap_or(Value::Null),
-        });
-        v["reference_frequency_hz"] = json!(gb.reference_frequency_hz());
-        v["dynamics_estimated"] = json!(gb.dynamics_estimated());
-        v["assumed"] = serde_json::to_value(&gb.assumed).unwrap_or(Value::Null);
-        v["warnings"] = json!(gb.warnings);
-    }
-    v
-}
-
 fn unknown_gearbox(id: &str) -> ApiError {
     ApiError::not_found(
         "unknown-gearbox",
@@ -263,7 +191,7 @@ pub async fn put(
             ),
         ));
     }
-    let (row, gb) = gearbox_row(&id, text, format, "request body").map_err(|e| {
+    let (row, gb) = GearboxRow::described(&id, text, format, "request body").map_err(|e| {
         ApiError::unprocessable(
             "invalid-gearbox",
             "Invalid gearbox description",
@@ -292,7 +220,7 @@ pub async fn put(
     } else {
         StatusCode::OK
     };
-    let mut r = json_response(status, &view(&stored, Some(&gb), true));
+    let mut r = json_response(status, &gearbox_json(&stored, Some(&gb), true));
     if let Ok(v) = HeaderValue::from_str(&format!("/v1/gearboxes/{id}")) {
         r.headers_mut().insert(header::LOCATION, v);
     }
@@ -314,7 +242,10 @@ pub async fn get(
         .await?
         .ok_or_else(|| unknown_gearbox(&id))?;
     let gb = app.tables.gearbox(&row).ok();
-    Ok(json_with_etag(&headers, &view(&row, gb.as_deref(), true)))
+    Ok(json_with_etag(
+        &headers,
+        &gearbox_json(&row, gb.as_deref(), true),
+    ))
 }
 
 /// `GET /v1/gearboxes`.
@@ -325,7 +256,8 @@ pub async fn list(
 ) -> ApiResult<Response> {
     caller.require_read(&app)?;
     let rows = app.store.list_gearboxes().await?;
-    let body = json!({"gearboxes": rows.iter().map(|r| view(r, None, false)).collect::<Vec<_>>()});
+    let body =
+        json!({"gearboxes": rows.iter().map(|r| gearbox_json(r, None, false)).collect::<Vec<_>>()});
     Ok(json_with_etag(&headers, &body))
 }
 

@@ -105,7 +105,7 @@ pub async fn get_machine(
     body["configuration"] = super::machines::config_json(&m);
     let gid = m.gearbox_id.as_deref().unwrap_or(BUILTIN_ID);
     body["gearbox"] = match app.store.get_gearbox(gid).await? {
-        Some(g) => super::gearboxes::view(&g, None, false),
+        Some(g) => crate::views::gearbox_json(&g, None, false),
         None => json!({"id": gid, "status": "unknown"}),
     };
     body["baseline"] = super::machines::baseline_json(&app, &m).await?;

@@ -3,6 +3,8 @@
 use async_trait::async_trait;
 pub use gearwear_core::signature::TableStatus;
 
+use gearwear_core::gearbox::{Gearbox, GearboxDescription, GearboxError, TextFormat};
+
 use super::StoreResult;
 
 /// A stored gearbox and the state of its signature-table job (without the table itself).
@@ -31,6 +33,48 @@ pub struct GearboxRow {
     pub updated_at: i64,
     pub started_at: Option<i64>,
     pub finished_at: Option<i64>,
+}
+
+impl GearboxRow {
+    /// The row of a new description (its table `queued`) and the gearbox it resolves to: the
+    /// description parsed from `text` (`format`, else JSON when it starts with `{`, else TOML;
+    /// `origin` names it in errors) and resolved.
+    pub fn described(
+        id: &str,
+        text: &str,
+        format: Option<TextFormat>,
+        origin: &str,
+    ) -> Result<(GearboxRow, Gearbox), GearboxError> {
+        let d = GearboxDescription::parse(text, format, origin)?;
+        let fmt = match format {
+            Some(TextFormat::Json) => "json",
+            Some(TextFormat::Toml) => "toml",
+            None if text.trim_start().starts_with('{') => "json",
+            None => "toml",
+        };
+        let gb = Gearbox::new(d)?;
+        let now = crate::now_ms();
+        let row = GearboxRow {
+            id: id.to_string(),
+            name: gb.name().to_string(),
+            source: text.to_string(),
+            source_format: fmt.into(),
+            description: gb.description.canonical_json(),
+            hash: gb.hash.clone(),
+            builtin: false,
+            status: TableStatus::Queued,
+            progress: 0.0,
+            error: None,
+            claimed_by: None,
+            lease_until: 0,
+            attempts: 0,
+            created_at: now,
+            updated_at: now,
+            started_at: None,
+            finished_at: None,
+        };
+        Ok((row, gb))
+    }
 }
 
 /// What a `put_gearbox` did.
