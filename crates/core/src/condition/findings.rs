@@ -150,9 +150,11 @@ pub fn why(feature: &str) -> String {
             "the time-synchronous average of `{s}` turned impulsive ({m}): a tooth on it hits \
              differently once per revolution"
         ),
-        ["stat", "ln_rms"] => "the overall vibration level (RMS)".into(),
-        ["stat", "ln_kurtosis"] => "the record's kurtosis (how impulsive it is)".into(),
-        ["stat", "ln_crest"] => "the crest factor (peaks over RMS)".into(),
+        ["stat", "ln_rms" | "rms"] => "the overall vibration level (RMS)".into(),
+        ["stat", "ln_kurtosis" | "kurtosis"] => {
+            "the record's kurtosis (how impulsive it is)".into()
+        }
+        ["stat", "ln_crest" | "crest"] => "the crest factor (peaks over RMS)".into(),
         ["order", "ln_sync_share"] => {
             "the share of the vibration that repeats with the input shaft".into()
         }
@@ -586,6 +588,12 @@ mod tests {
         let out = findings(&score(&f, &[("stat.kurtosis", 1.5)]), &parts(), None);
         assert_eq!(out.len(), 1, "{out:#?}");
         assert_eq!(out[0].kind, "unexplained");
-        assert!(out[0].summary.contains("stat.kurtosis"));
+        // In words, not the feature's code.
+        let summary = &out[0].summary;
+        assert!(
+            summary.contains("the record's kurtosis (how impulsive it is)"),
+            "{summary}"
+        );
+        assert!(!summary.contains("stat.kurtosis"), "{summary}");
     }
 }
