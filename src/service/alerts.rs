@@ -4,20 +4,23 @@
 //! core's [`crate::assessment::episodes`], the store's `alerts` module); acknowledging is the
 //! one transition a person makes.
 
+use std::collections::HashMap;
+
 use axum::Json;
 use axum::body::Body;
 use axum::extract::{Path, RawQuery, State};
 use axum::http::HeaderMap;
 use axum::response::{IntoResponse, Response};
 use serde::Deserialize;
-use serde_json::json;
+use serde_json::{Value, json};
 
 use super::AppState;
 use super::auth::Caller;
 use super::error::{ApiError, ApiResult};
 use super::http::{check_machine_id, read_body};
 use crate::keys::Scope;
-use crate::store::{Acknowledged, AlertFilter, now_ms};
+use crate::store::{Acknowledged, AlertFilter, AlertRow, now_ms};
+use crate::time::rfc3339;
 use crate::views::{alert_event_json, alert_json};
 
 /// Longest acknowledgement note, in characters.
@@ -75,7 +78,12 @@ pub async fn list(
         .store
         .list_alerts(filter, q.machine_id.as_deref(), limit)
         .await?;
-    Ok(Json(json!({"alerts": rows.iter().map(alert_json).collect::<Vec<_>>()})).into_response())
+    let mut labels = Labels::default();
+    let mut alerts = Vec::with_capacity(rows.len());
+    for a in &rows {
+        alerts.push(alert_view(&app, a, &mut labels).await?);
+    }
+    Ok(Json(json!({"alerts": alerts})).into_response())
 }
 
 fn unknown_alert(id: &str) -> ApiError {
@@ -96,12 +104,15 @@ pub async fn get(
     let Some((a, events)) = app.store.get_alert(&id).await? else {
         return Err(unknown_alert(&id));
     };
-    let mut body = alert_json(&a);
-    body["audit"] = events
-        .iter()
-        .map(alert_event_json)
-        .collect::<Vec<_>>()
-        .into();
+    let mut labels = Labels::default();
+    let mut body = alert_view(&app, &a, &mut labels).await?;
+    let mut audit = Vec::with_capacity(events.len());
+    for e in &events {
+        let mut line = alert_event_json(e);
+        line["by_label"] = labels.of(&app, e.by.as_deref()).await?.into();
+        audit.push(line);
+    }
+    body["audit"] = audit.into();
     Ok(Json(body).into_response())
 }
 
@@ -153,7 +164,8 @@ pub async fn acknowledge(
     {
         Acknowledged::Done(a) => {
             app.webhook_wake.notify_one();
-            Ok(Json(alert_json(&a)).into_response())
+            let view = alert_view(&app, &a, &mut Labels::default()).await?;
+            Ok(Json(view).into_response())
         }
         Acknowledged::Unknown => Err(unknown_alert(&id)),
         Acknowledged::Refused(a) => Err(ApiError::new(
@@ -174,4 +186,95 @@ pub async fn acknowledge(
         .with("alert_id", id.as_str())
         .with("state", a.state.as_str())),
     }
+}
+
+/// The labels of API keys by id, read once per answer: people read "planner's tablet", not a
+/// key id. A key deleted since has none (its id stays in `acknowledged_by` / `by`).
+#[derive(Default)]
+pub struct Labels(HashMap<String, Option<String>>);
+
+impl Labels {
+    pub async fn of(&mut self, app: &AppState, id: Option<&str>) -> ApiResult<Option<String>> {
+        let Some(id) = id.filter(|i| !i.is_empty()) else {
+            return Ok(None);
+        };
+        if let Some(l) = self.0.get(id) {
+            return Ok(l.clone());
+        }
+        let label = app.store.get_key(id).await?.map(|k| k.label);
+        self.0.insert(id.to_string(), label.clone());
+        Ok(label)
+    }
+}
+
+/// The machine's open (or acknowledged) episode, if any.
+pub async fn open_alert(app: &AppState, machine_id: &str) -> ApiResult<Option<AlertRow>> {
+    let open = app
+        .store
+        .list_alerts(AlertFilter::Open, Some(machine_id), 1)
+        .await?;
+    Ok(open.into_iter().next())
+}
+
+/// A machine view's `state`: the worse of its latest record's level and its open alert's,
+/// and which of the two it is (`alert` when the alert's is worse: an alarm stays open over
+/// quiet records until enough of them close it).
+pub fn state_json(record_level: crate::assessment::Level, open: Option<&AlertRow>) -> Value {
+    let alert_level = open.map(|a| a.level);
+    let from_alert = alert_level.is_some_and(|a| a > record_level);
+    json!({
+        "level": if from_alert { alert_level.unwrap_or(record_level) } else { record_level },
+        "source": if from_alert { "alert" } else { "record" },
+        "record_level": record_level,
+        "alert_level": alert_level,
+        "alert_since": open.map(|a| rfc3339(a.opened_at)),
+        "acknowledged": open.map(|a| a.state == "acknowledged"),
+    })
+}
+
+/// An episode as the API shows it: the store's JSON with the acknowledging key's label.
+pub async fn alert_view(app: &AppState, a: &AlertRow, labels: &mut Labels) -> ApiResult<Value> {
+    let mut v = alert_json(a);
+    v["acknowledged_by_label"] = labels.of(app, a.acknowledged_by.as_deref()).await?.into();
+    Ok(v)
+}
+
+/// A machine view's `open_alert`: its open (or acknowledged) episode, with `evidence` — the
+/// record that opened it or last escalated it (its time, level, reason and findings), which
+/// is what the alert is about even when later records are quiet. Null without one.
+pub async fn open_alert_json(app: &AppState, open: Option<&AlertRow>) -> ApiResult<Value> {
+    let Some(a) = open else {
+        return Ok(Value::Null);
+    };
+    let mut v = alert_view(app, a, &mut Labels::default()).await?;
+    let events = app
+        .store
+        .get_alert(&a.id)
+        .await?
+        .map(|(_, e)| e)
+        .unwrap_or_default();
+    let decided = events
+        .iter()
+        .rev()
+        .find(|e| matches!(e.event.as_str(), "opened" | "escalated") && e.record_id.is_some());
+    let (event, record_id) = match decided {
+        Some(e) => (e.event.as_str(), e.record_id.clone().unwrap_or_default()),
+        None => ("opened", a.record_id.clone()),
+    };
+    v["evidence"] = match app.store.diagnosis_of_record(&record_id).await? {
+        None => Value::Null,
+        Some(d) => {
+            let body: Value = serde_json::from_str(&d.body).unwrap_or(Value::Null);
+            json!({
+                "event": event,
+                "record_id": record_id,
+                "diagnosis_id": d.id,
+                "measured_at": rfc3339(d.measured_at),
+                "alert_level": d.alert_level,
+                "reason": body["alert"]["reason"],
+                "findings": body.get("findings").cloned().unwrap_or(json!([])),
+            })
+        }
+    };
+    Ok(v)
 }

@@ -65,11 +65,16 @@ impl MachineContext {
                 g.id,
                 g.error.as_deref().unwrap_or("no reason stored")
             ),
-            s => format!(
-                "the signature table of gearbox `{}` is not ready ({s}, {:.0} %): no wear degree \
-                 yet; this diagnosis uses the machine's baseline and indicators only",
+            TableStatus::Queued | TableStatus::Running => format!(
+                "the signature table of gearbox `{}` is being computed ({:.0} % done): no \
+                 wear degree until it is ready",
                 g.id,
                 100.0 * g.progress
+            ),
+            s => format!(
+                "the signature table of gearbox `{}` is {s}: no wear degree; this diagnosis \
+                 uses the machine's baseline and indicators only",
+                g.id
             ),
         })
     }
@@ -439,6 +444,7 @@ pub async fn baseline_json(app: &AppState, m: &MachineRow) -> ApiResult<Value> {
             Ok(json!({
                 "record_id": r.id,
                 "received_at": rfc3339(r.received_at),
+                "measured_at": rfc3339(r.measured_at),
                 "baseline_at": r.baseline_at.map(rfc3339),
                 "channels": f.channels.keys().collect::<Vec<_>>(),
                 "current_gearbox": ctx_hash.as_deref() == Some(f.gearbox_hash.as_str()),
@@ -467,8 +473,9 @@ pub async fn baseline_json(app: &AppState, m: &MachineRow) -> ApiResult<Value> {
         "count": rows.len(),
         "min_records": MIN_BASELINE_RECORDS,
         "ready": !fitted.is_empty(),
-        "first_at": rows.first().map(|r| rfc3339(r.baseline_at.unwrap_or(r.received_at))),
-        "last_at": rows.last().map(|r| rfc3339(r.baseline_at.unwrap_or(r.received_at))),
+        // The span the baseline's records were measured over (they are in measurement order).
+        "first_at": rows.first().map(|r| rfc3339(r.measured_at)),
+        "last_at": rows.last().map(|r| rfc3339(r.measured_at)),
         "channels": channels,
     }))
 }

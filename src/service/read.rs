@@ -85,6 +85,9 @@ pub async fn get_machine(
         s["warnings"] = full.get("warnings").cloned().unwrap_or(json!([]));
         s["alert"] = full.get("alert").cloned().unwrap_or(Value::Null);
         s["channels"] = full.get("channels").cloned().unwrap_or(Value::Null);
+        if let Some(cs) = s["channels"].as_array_mut() {
+            cs.iter_mut().for_each(feature_words);
+        }
         s["indicators"] = full.get("indicators").cloned().unwrap_or(Value::Null);
         // The record's measured speed and load, why the wear figure is missing (when it is)
         // and what the departure from the baseline points at, for people.
@@ -111,7 +114,10 @@ pub async fn get_machine(
     body["baseline"] = super::machines::baseline_json(&app, &m).await?;
     body["thresholds"] = serde_json::to_value(app.settings.thresholds).unwrap_or(Value::Null);
     body["latest"] = latest.unwrap_or(Value::Null);
-    body["trend_summary"] = super::trend::wear_summary(&app, &trend);
+    let open = super::alerts::open_alert(&app, &id).await?;
+    body["state"] = super::alerts::state_json(m.alert_level, open.as_ref());
+    body["open_alert"] = super::alerts::open_alert_json(&app, open.as_ref()).await?;
+    body["trend_summary"] = super::trend::summary(&app, &trend, open.as_ref());
     body["trend"] = trend
         .iter()
         .map(|d| {
@@ -130,6 +136,20 @@ pub async fn get_machine(
         .collect::<Vec<_>>()
         .into();
     Ok(json_with_etag(&headers, &body))
+}
+
+/// Each of a channel's `novelty.top_features` with `says`: the feature's departure in words
+/// ("first sidebands at shaft `idler`'s rate around mesh harmonic 2 …: up by 4.9× the healthy
+/// spread"), for the people reading the machine page.
+fn feature_words(channel: &mut Value) {
+    let Some(top) = channel["novelty"]["top_features"].as_array_mut() else {
+        return;
+    };
+    for f in top {
+        if let (Some(name), Some(z)) = (f["name"].as_str(), f["z"].as_f64()) {
+            f["says"] = crate::condition::findings::departure_words(name, z).into();
+        }
+    }
 }
 
 #[derive(Debug, Default, Deserialize)]

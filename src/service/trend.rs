@@ -1,5 +1,6 @@
 //! A machine's trend: `GET /v1/machines/{id}/trend?series=&channel=` and the
-//! machine view's `trend_summary`. The series are read in measurement order (`measured_at`:
+//! machine view's `trend_summary` (of the wear series, or the novelty series for a machine
+//! whose records have no wear figure). The series are read in measurement order (`measured_at`:
 //! the record's `recorded_at`, else its receive time) and fitted by the core's
 //! [`trend`](crate::trend) (Theil–Sen, Mann–Kendall, bootstrap intervals).
 
@@ -13,7 +14,8 @@ use super::AppState;
 use super::auth::Caller;
 use super::error::{ApiError, ApiResult};
 use super::http::{check_machine_id, json_with_etag};
-use crate::store::DiagnosisRow;
+use crate::assessment::Level;
+use crate::store::{AlertRow, DiagnosisRow};
 use crate::time::rfc3339;
 use crate::trend::{self, Sample, Trend, TrendOptions};
 
@@ -182,34 +184,63 @@ fn fit_points(pts: &[Point]) -> Option<Trend> {
     trend::fit(&samples, &TrendOptions::default())
 }
 
-/// `{fit, thresholds, projection, verdict}` of a series' points.
-fn assess(pts: &[Point], limits: Option<(f64, f64)>) -> Value {
+/// `{fit, thresholds, projection, verdict}` of a series' points. With the machine's open
+/// alert: no projection to a level the alert already holds (the verdict says it is open
+/// since when instead, never "alarm in 6 days" over an open alarm).
+fn assess(pts: &[Point], limits: Option<(f64, f64)>, open: Option<&AlertRow>) -> Value {
     let t = fit_points(pts);
     let last = pts.iter().map(|p| p.measured_at).max().unwrap_or(0);
-    let crossing = |threshold: f64| -> Value {
+    let held = |name: &str| {
+        let lv = if name == "alarm" {
+            Level::Alarm
+        } else {
+            Level::Warning
+        };
+        limits.is_some() && open.is_some_and(|a| a.level >= lv)
+    };
+    let crossing = |name: &str, threshold: f64| -> Value {
         match t.as_ref().and_then(|t| t.crossing(threshold)) {
-            None => Value::Null,
-            Some(c) => json!({
+            Some(c) if !held(name) => json!({
                 "days": c.days,
                 "interval_90": c.interval_90,
                 // Beyond a century the date means nothing (and would overflow).
                 "at": (c.days <= 36_500.0)
                     .then(|| rfc3339(last + (c.days * MS_PER_DAY).round() as i64)),
             }),
+            _ => Value::Null,
         }
     };
     let significant = t.as_ref().is_some_and(|t| t.fit.significant);
     let projection = match limits {
-        Some((w, a)) if significant => json!({"warning": crossing(w), "alarm": crossing(a)}),
+        Some((w, a)) if significant => {
+            json!({"warning": crossing("warning", w), "alarm": crossing("alarm", a)})
+        }
         _ => Value::Null,
     };
     let names: Vec<(&str, f64)> = limits
         .map(|(w, a)| vec![("warning", w), ("alarm", a)])
-        .unwrap_or_default();
-    let verdict = match &t {
+        .unwrap_or_default()
+        .into_iter()
+        .filter(|(n, _)| !held(n))
+        .collect();
+    let mut verdict = match &t {
         None => format!("not enough points for a trend ({})", pts.len()),
         Some(_) => trend::verdict(t.as_ref(), &names),
     };
+    if let Some(a) = open.filter(|_| limits.is_some()) {
+        let since = rfc3339(a.opened_at);
+        let open_text = format!(
+            "{} open since {} {} UTC",
+            a.level,
+            &since[..10],
+            &since[11..16]
+        );
+        verdict = if names.is_empty() || t.is_none() {
+            open_text
+        } else {
+            format!("{open_text}; {verdict}")
+        };
+    }
     json!({
         "fit": t.as_ref().map(|t| &t.fit),
         "thresholds": limits.map(|(w, a)| json!({"warning": w, "alarm": a})),
@@ -218,12 +249,21 @@ fn assess(pts: &[Point], limits: Option<(f64, f64)>) -> Value {
     })
 }
 
-/// The machine view's `trend_summary`: the wear series' `{series, verdict, fit, projection}`
-/// over `rows` (the latest diagnoses in measurement order).
-pub fn wear_summary(app: &AppState, rows: &[DiagnosisRow]) -> Value {
-    let pts = points(rows, &Series::Wear, None);
-    let mut a = assess(&pts, thresholds(app, &Series::Wear, &pts));
-    a["series"] = "wear".into();
+/// The machine view's `trend_summary`: `{series, verdict, fit, projection}` over `rows` (the
+/// latest diagnoses in measurement order) of the series that exists — the wear degree when
+/// any record has a wear figure, else the novelty score when any has one — agreeing with the
+/// machine's open alert (`open`).
+pub fn summary(app: &AppState, rows: &[DiagnosisRow], open: Option<&AlertRow>) -> Value {
+    let mut series = Series::Wear;
+    let mut pts = points(rows, &series, None);
+    if pts.is_empty() {
+        let novelty = points(rows, &Series::Novelty, None);
+        if !novelty.is_empty() {
+            (series, pts) = (Series::Novelty, novelty);
+        }
+    }
+    let mut a = assess(&pts, thresholds(app, &series, &pts), open);
+    a["series"] = series.name().into();
     if let Value::Object(m) = &mut a {
         m.remove("thresholds");
     }
@@ -247,10 +287,11 @@ pub async fn payloads_wanted(app: &AppState) -> bool {
     }
 }
 
-/// The machine's wear `trend_summary` with a new diagnosis in it (not stored yet): the latest
+/// The machine's `trend_summary` with a new diagnosis in it (not stored yet): the latest
 /// stored diagnoses by measurement time plus this one, for the record's webhook payloads.
 /// Null when the history cannot be read (the record is still stored; its payloads then lack
-/// the trend).
+/// the trend). It agrees with the alert open when the record arrived (this record's own
+/// transition is made in its ingest transaction, after the payload is written).
 pub async fn summary_with(app: &AppState, d: &DiagnosisRow) -> Value {
     let mut rows = match app
         .store
@@ -270,7 +311,14 @@ pub async fn summary_with(app: &AppState, d: &DiagnosisRow) -> Value {
     if rows.len() > SERIES_POINTS as usize {
         rows.remove(0);
     }
-    wear_summary(app, &rows)
+    let open = match super::alerts::open_alert(app, &d.machine_id).await {
+        Ok(open) => open,
+        Err(e) => {
+            tracing::warn!(machine_id = %d.machine_id, error = ?e, "open alert for the webhook payload");
+            None
+        }
+    };
+    summary(app, &rows, open.as_ref())
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -313,7 +361,8 @@ pub async fn get_trend(
         app.store.recent_diagnoses(&id, SERIES_POINTS).await?
     };
     let pts = points(&rows, &series, channel);
-    let mut body = assess(&pts, thresholds(&app, &series, &pts));
+    let open = super::alerts::open_alert(&app, &id).await?;
+    let mut body = assess(&pts, thresholds(&app, &series, &pts), open.as_ref());
     body["machine_id"] = id.as_str().into();
     body["series"] = series.name().into();
     body["channel"] = channel.map_or(Value::Null, Value::from);

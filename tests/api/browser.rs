@@ -601,7 +601,15 @@ async fn dashboard_shows_the_fleet_by_severity_and_a_machine_from_the_url() {
         poor_fit,
         "{wear} / {api_m}"
     );
-    for chart in ["trend", "novelty"] {
+    // The second chart (novelty beside a wear trend) is there only when the records have
+    // wear figures; otherwise the main chart is the novelty.
+    let with_wear = trend_count(&api_m, "estimate");
+    let charts: &[&str] = if with_wear > 0 {
+        &["trend", "novelty"]
+    } else {
+        &["trend"]
+    };
+    for chart in charts {
         let ticks = d
             .script(&format!(
                 "return [...document.querySelectorAll('#{chart} .tick-x')].map(t => [t.textContent, Date.parse(t.dataset.t) / 1000])"
@@ -625,51 +633,61 @@ async fn dashboard_shows_the_fleet_by_severity_and_a_machine_from_the_url() {
             .await;
         assert!(label.as_str().unwrap().starts_with("local time"), "{label}");
     }
-    // A mark per diagnosis, in time order: a wear point where it has a wear figure, a hollow
-    // mark on the axis where it has none (the model does not fit these records: never a
-    // point at 0).
-    let xs = d
-        .script("return [...document.querySelectorAll('#trend .trend-point, #trend .trend-nowear')].map(c => +c.getAttribute('cx'))")
-        .await;
-    let xs: Vec<f64> = xs
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
-    assert_eq!(xs.len(), 5, "a wear mark per diagnosis: {xs:?}");
-    assert!(xs.windows(2).all(|w| w[0] <= w[1]), "{xs:?}");
-    let with_wear = api_m["trend"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|p| p["estimate"].is_number())
-        .count();
-    let points = d
-        .script("return document.querySelectorAll('#trend .trend-point').length")
-        .await;
-    assert_eq!(points, json!(with_wear), "{api_m}");
-    // The novelty series: a point per scored diagnosis, the threshold drawn, the broken record
-    // above it.
-    let scored = api_m["trend"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|p| p["novelty"].is_number())
-        .count();
-    assert!(scored >= 2, "{api_m}");
-    let nov = d
+    // The main chart: the wear figures when there are any (a point each, no mark at 0 for a
+    // record without one); else the novelty, a point per scored diagnosis in time order.
+    let scored = trend_count(&api_m, "novelty");
+    let main = d
         .script(
-            "return {points: document.querySelectorAll('#novelty .novelty-point').length, \
-                     anomalous: document.querySelectorAll('#novelty .novelty-point.anomalous').length, \
-                     threshold: document.querySelectorAll('#novelty .novelty-threshold').length, \
-                     baseline: document.querySelectorAll('#novelty .baseline-span').length}",
+            "const svg = document.getElementById('trend'); \
+             return {series: svg.dataset.series, nowear: svg.querySelectorAll('.trend-nowear').length, \
+                     wear: svg.querySelectorAll('.trend-point').length, \
+                     xs: [...svg.querySelectorAll('.novelty-point')].map(c => +c.getAttribute('cx')), \
+                     legend: [...document.querySelectorAll('#trend-legend li')].map(li => li.textContent), \
+                     second: !document.getElementById('novelty-fig').hidden}",
         )
+        .await;
+    assert_eq!(main["nowear"], 0, "{main}");
+    if with_wear > 0 {
+        assert_eq!(main["series"], "wear", "{main}");
+        assert_eq!(main["wear"], json!(with_wear), "{api_m}");
+        assert_eq!(main["second"], true, "{main}");
+    } else {
+        assert_eq!(main["series"], "novelty", "{main}");
+        assert_eq!(main["second"], false, "{main}");
+        let xs: Vec<f64> = main["xs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        assert_eq!(xs.len(), scored, "a point per scored diagnosis: {main}");
+        assert!(xs.windows(2).all(|w| w[0] <= w[1]), "{xs:?}");
+        assert!(
+            main["legend"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .any(|l| l == "novelty score"),
+            "{main}"
+        );
+    }
+    // The novelty: a score for the baseline's later records and the broken one, drawn in the
+    // second chart beside a wear trend, else in the main one: a point each, the threshold,
+    // each baseline record marked.
+    assert!(scored >= 2, "{api_m}");
+    let chart = if with_wear > 0 { "novelty" } else { "trend" };
+    let nov = d
+        .script(&format!(
+            "return {{points: document.querySelectorAll('#{chart} .novelty-point').length, \
+                     anomalous: document.querySelectorAll('#{chart} .novelty-point.anomalous').length, \
+                     threshold: document.querySelectorAll('#{chart} .novelty-threshold').length, \
+                     baseline: document.querySelectorAll('#{chart} .baseline-point, #{chart} .baseline-mark').length}}"
+        ))
         .await;
     assert_eq!(nov["points"], json!(scored), "{nov}");
     assert!(nov["anomalous"].as_u64().unwrap() >= 1, "{nov}");
     assert!(nov["threshold"].as_u64().unwrap() >= 1, "{nov}");
-    assert_eq!(nov["baseline"], 1, "{nov}");
+    assert_eq!(nov["baseline"], api_m["baseline"]["count"], "{nov}");
     let png = d.cmd(reqwest::Method::GET, "/screenshot", None).await;
     let png = base64::engine::general_purpose::STANDARD
         .decode(png.as_str().unwrap())
@@ -694,7 +712,7 @@ async fn dashboard_shows_the_fleet_by_severity_and_a_machine_from_the_url() {
         .script(
             "const a = document.getElementById('alert'); \
              return {level: a.dataset.level, bg: getComputedStyle(a).borderLeftColor, \
-                     text: a.textContent, novelty: document.querySelector('#novelty .chart-note')?.textContent}",
+                     text: a.textContent, novelty: (document.querySelector('#novelty-fig:not([hidden]) .chart-note') || document.querySelector('#trend .chart-note'))?.textContent}",
         )
         .await;
     assert_eq!(alert["level"], "unknown", "{alert}");
@@ -819,7 +837,10 @@ async fn dashboard_shows_the_fleet_by_severity_and_a_machine_from_the_url() {
         .await;
     assert_eq!(drawn["runs"], 2, "{drawn}");
     assert_eq!(drawn["points"], 3, "{drawn}");
-    assert_eq!(drawn["gaps"], 1, "{drawn}");
+    assert_eq!(
+        drawn["gaps"], 0,
+        "no mark at 0 for the record without a figure: {drawn}"
+    );
     assert!(
         drawn["days"]
             .as_array()
@@ -847,16 +868,16 @@ async fn dashboard_shows_the_fleet_by_severity_and_a_machine_from_the_url() {
                            summary: 'gear 24T (stage 2 pinion) on shaft `idler`: the envelope repeats at `idler`\\'s rate +42.6 dB', \
                            evidence: [{feature: 'env.idler', change: '+42.6 dB', z: 12.5, why: 'impulses once per revolution'}]}, \
                           {kind: 'shaft', shaft: 'idler', strength: 4.3, summary: 'shaft `idler` (bent shaft or misalignment): its 1× line up +9.9 dB', evidence: []}]}}; \
-             renderLatest(m); renderFindings(m.latest); \
+             renderLatest(m); renderFindings(m); \
              const out = {wear: document.getElementById('wear-estimate').textContent, \
                           speed: document.getElementById('speed').textContent, \
                           load: document.getElementById('load').textContent, \
                           shown: !document.getElementById('findings-box').hidden, \
-                          findings: [...document.querySelectorAll('#findings li')].map(li => li.textContent), \
-                          code: [...document.querySelectorAll('#findings li:first-child code')].map(c => c.textContent), \
-                          why: document.querySelector('#findings li').title}; \
+                          findings: [...document.querySelectorAll('#findings > li')].map(li => li.textContent), \
+                          code: [...document.querySelectorAll('#findings > li:first-child > code')].map(c => c.textContent), \
+                          why: document.querySelector('#findings li .evidence').textContent}; \
              m.latest.findings = []; m.latest.operating_state = null; m.latest.state_note = 'no hint'; \
-             renderLatest(m); renderFindings(m.latest); \
+             renderLatest(m); renderFindings(m); \
              out.unmeasured = document.getElementById('speed').textContent; \
              out.none = document.getElementById('findings-box').hidden; \
              return out",
@@ -878,8 +899,9 @@ async fn dashboard_shows_the_fleet_by_severity_and_a_machine_from_the_url() {
         "{real}"
     );
     assert_eq!(real["code"], json!(["idler", "idler"]), "{real}");
-    assert!(
-        real["why"].as_str().unwrap().contains("env.idler +42.6 dB"),
+    // The evidence in sentences, not feature codes.
+    assert_eq!(
+        real["why"], "impulses once per revolution: +42.6 dB",
         "{real}"
     );
     assert_eq!(real["unmeasured"], "not measured: no hint", "{real}");

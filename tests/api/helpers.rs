@@ -762,3 +762,25 @@ pub fn split_pg_url(url: &str) -> (&str, &str, &str) {
         .unwrap_or(url.len());
     (&url[..start], &url[start..end], &url[end..])
 }
+
+/// How many of a machine view's `trend` points have a number in `member` (`estimate`,
+/// `novelty`).
+pub fn trend_count(view: &Value, member: &str) -> usize {
+    view["trend"]
+        .as_array()
+        .map_or(0, |t| t.iter().filter(|p| p[member].is_number()).count())
+}
+
+/// PUT a gearbox description (TOML) with the admin key; the status.
+pub async fn put_gearbox(app: &TestApp, id: &str, toml: &str) -> u16 {
+    let r = app
+        .client
+        .put(app.url(&format!("/v1/gearboxes/{id}")))
+        .bearer_auth(&app.admin_key)
+        .header("content-type", "application/toml")
+        .body(toml.to_string())
+        .send()
+        .await
+        .unwrap();
+    r.status().as_u16()
+}

@@ -14,6 +14,7 @@ mod doors;
 mod faults;
 mod gearboxes;
 mod lifecycle;
+mod machine_page;
 mod mqtt;
 mod openapi;
 mod operating_state;

@@ -9,6 +9,8 @@ use super::StoreResult;
 pub struct BaselineRecord {
     pub id: String,
     pub received_at: i64,
+    /// When it was measured (its `recorded_at`, else its receive time), unix ms.
+    pub measured_at: i64,
     pub baseline_at: Option<i64>,
     /// The record's features JSON (as stored with it).
     pub features: String,
@@ -110,7 +112,7 @@ macro_rules! baselines_sql {
 
             async fn baseline_records(&self, machine_id: &str) -> StoreResult<Vec<BaselineRecord>> {
                 let rows = sqlx::query(
-                    "SELECT id, received_at, baseline_at, features FROM records \
+                    "SELECT id, received_at, measured_at, baseline_at, features FROM records \
                      WHERE machine_id = $1 AND baseline = 1 ORDER BY measured_at, id",
                 )
                 .bind(machine_id)
@@ -118,9 +120,13 @@ macro_rules! baselines_sql {
                 .await?;
                 rows.iter()
                     .map(|r| -> StoreResult<BaselineRecord> {
+                        let received_at: i64 = r.try_get("received_at")?;
                         Ok(BaselineRecord {
                             id: r.try_get("id")?,
-                            received_at: r.try_get("received_at")?,
+                            received_at,
+                            measured_at: r
+                                .try_get::<Option<i64>, _>("measured_at")?
+                                .unwrap_or(received_at),
                             baseline_at: r.try_get("baseline_at")?,
                             features: r.try_get("features")?,
                         })

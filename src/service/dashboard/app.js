@@ -83,12 +83,19 @@ function renderMachines(list, gearboxes) {
 
 // ---------- one machine ----------
 
+/** The machine's state: the worse of its latest record's level and its open alert's (`state`). */
+function machineState(m) {
+  const st = m.state || {};
+  return { level: level(st.level || m.alert_level), fromAlert: st.source === "alert", st };
+}
+
 function renderAlert(m) {
   const l = m.latest;
   const box = $("alert");
-  const lv = level(l && l.alert ? l.alert.level : m.alert_level);
+  const { level: lv, fromAlert } = machineState(m);
   box.className = "alert " + lv;
   box.dataset.level = lv;
+  box.dataset.source = fromAlert ? "alert" : "record";
   if (!l) {
     $("alert-title").textContent = "No record yet.";
     $("alert-reason").textContent = "Post one to /v1/machines/" + m.id + "/records; nothing vouches for this machine until then.";
@@ -96,13 +103,25 @@ function renderAlert(m) {
     return;
   }
   const a = l.alert || { level: l.alert_level, basis: null, reason: "" };
-  $("alert-title").textContent = LEVELS[lv].icon + " " + lv[0].toUpperCase() + lv.slice(1) + ":";
-  $("alert-reason").textContent = a.reason || (lv === "unknown" ? LEVELS.unknown.help : "");
+  const title = LEVELS[lv].icon + " " + lv[0].toUpperCase() + lv.slice(1);
+  const oa = m.open_alert;
+  if (fromAlert && oa) {
+    // The alert is worse than the latest record: say so, and what opened it.
+    $("alert-title").textContent = title + " open since " + when(oa.opened_at) + " — last record " + level(l.alert_level) + ".";
+    const ev = oa.evidence;
+    $("alert-reason").textContent = ev && ev.reason
+      ? "The record of " + when(ev.measured_at) + " that " + ev.event + " it: " + ev.reason
+      : "";
+  } else {
+    $("alert-title").textContent = title + ":";
+    $("alert-reason").textContent = a.reason || (lv === "unknown" ? LEVELS.unknown.help : "");
+  }
   const bits = [];
   // A single-channel record's channel is just "0": name it only when several were diagnosed.
   if (l.channel && Array.isArray(l.channels) && l.channels.length > 1) bits.push("deciding channel: " + l.channel);
   if (a.basis) bits.push("based on: " + (a.basis === "none" ? "nothing (no fit, no baseline)" : a.basis));
-  bits.push("record of " + when(measuredAt(l)));
+  if (fromAlert && a.reason) bits.push("last record of " + when(measuredAt(l)) + ": " + a.reason);
+  else bits.push("record of " + when(measuredAt(l)));
   $("alert-basis").textContent = bits.join(" · ");
 }
 
@@ -124,8 +143,11 @@ function renderChannels(l) {
     h("td", {}, tr, n && num(n.score) ? n.score.toFixed(2) + " / " + fmt(n.threshold, 2) : "no baseline");
     const w = c.wear_degree;
     h("td", {}, tr, w && num(w.estimate) ? w.estimate.toFixed(3) : c.fit && c.fit.inflated ? "no figure (poor fit)" : "–");
-    const top = n && Array.isArray(n.top_features) ? n.top_features.slice(0, 3).map((f) => f.name + " z " + fmt(f.z, 1)).join(", ") : "";
-    h("td", { class: "muted" }, tr, top || (c.alert && c.alert.reason) || "");
+    // The departures in words (`says`); a stored answer from before they were given: the feature's name.
+    const top = n && Array.isArray(n.top_features) ? n.top_features.slice(0, 2).map((f) => f.says || f.name + " (" + fmt(f.z, 1) + " spreads)") : [];
+    const why = h("td", { class: "muted why" }, tr);
+    if (top.length) top.forEach((t) => codeText(h("div", {}, why), t));
+    else why.textContent = (c.alert && c.alert.reason) || "";
   }
 }
 
@@ -199,24 +221,47 @@ function speedText(l) {
   return l && l.state_note ? "not measured: " + l.state_note : "–";
 }
 
-/** `text` into `node`, its `name` spans (the core's sentences quote part names so) as code. */
-function renderFindings(l) {
+/** One finding as a list item: its sentence, its kind and strength, its evidence in sentences. */
+function findingItem(ol, f) {
+  const li = h("li", { class: "finding" }, ol);
+  codeText(li, f.summary || f.kind || "");
+  li.dataset.kind = f.kind || "";
+  h("span", { class: "kind" }, li, (f.kind || "") + (num(f.strength) ? ", strength " + f.strength.toFixed(1) + " baseline spreads" : ""));
+  const ev = Array.isArray(f.evidence) ? f.evidence : [];
+  if (!ev.length) return;
+  const ul = h("ul", { class: "evidence" }, li);
+  for (const e of ev.slice(0, 3)) codeText(h("li", {}, ul), e.why + ": " + e.change);
+}
+
+/**
+ * The findings beside each other: those of the record that opened or last escalated the open
+ * alert (what the alert is about), and the latest record's.
+ */
+function renderFindings(m) {
+  const l = m.latest;
+  const ev = m.open_alert && m.open_alert.evidence;
+  const abox = $("alert-findings-box");
+  abox.hidden = !ev;
+  $("alert-findings").innerHTML = "";
+  if (ev) {
+    $("alert-findings-title").textContent = "What the " + level(m.open_alert.level) + " is about";
+    const fs = Array.isArray(ev.findings) ? ev.findings : [];
+    const note = $("alert-findings-note");
+    note.textContent = "";
+    const a = h("a", { href: "#/records/" + encodeURIComponent(ev.record_id), class: "record-link" }, note, "the record of " + when(ev.measured_at));
+    a.dataset.record = ev.record_id;
+    note.appendChild(document.createTextNode(" " + ev.event + " the alert" + (fs.length ? "" : "; it names no part (no measured speed or no baseline with states)")));
+    for (const f of fs) findingItem($("alert-findings"), f);
+  }
   const box = $("findings-box");
   const ol = $("findings");
   ol.innerHTML = "";
   const fs = (l && Array.isArray(l.findings)) ? l.findings : [];
-  box.hidden = !l || (!fs.length && !l.operating_state);
-  $("findings-note").textContent = fs.length
-    ? "what the departure from the baseline at this speed and load points at, strongest first"
-    : "none: the latest record does not depart from its baseline at this speed and load (or the machine has no baseline with states yet)";
-  for (const f of fs) {
-    const li = h("li", { class: "finding" }, ol);
-    codeText(li, f.summary || f.kind || "");
-    li.dataset.kind = f.kind || "";
-    h("span", { class: "kind" }, li, (f.kind || "") + (num(f.strength) ? ", strength " + f.strength.toFixed(1) : ""));
-    const ev = Array.isArray(f.evidence) ? f.evidence : [];
-    if (ev.length) li.title = ev.map((e) => e.feature + " " + e.change + " (z " + fmt(e.z, 1) + "): " + e.why).join("\n");
-  }
+  box.hidden = !l || (!fs.length && !l.operating_state && !ev);
+  $("findings-note").textContent = (l ? "record of " + when(measuredAt(l)) + ": " : "") + (fs.length
+    ? "what its departure from the baseline at this speed and load points at, strongest first"
+    : "none: it does not depart from its baseline at this speed and load (or the machine has no baseline with states yet)");
+  for (const f of fs) findingItem(ol, f);
 }
 
 function renderLatest(m) {
@@ -236,6 +281,9 @@ function renderLatest(m) {
   $("novelty-latest").textContent = n && num(n.score)
     ? n.score.toFixed(2) + " (threshold " + fmt(n.threshold, 2) + (n.anomalous ? ", anomalous)" : ")")
     : "–";
+  // The model's terms only where its reading counts (a wear figure); the record page has them all.
+  const modelView = !!(w && num(w.estimate));
+  for (const e of document.querySelectorAll("#machine .model-term")) e.hidden = !modelView;
   $("motion-state").textContent = (l && l.motion_state) || "–";
   $("f1").textContent = l && num(l.f1_hz)
     ? l.f1_hz.toFixed(1) + " Hz" + (num(l.shaft_hz) ? " (shaft " + l.shaft_hz.toFixed(2) + " Hz)" : "")
@@ -253,28 +301,29 @@ function renderMachine(m) {
   $("machine").hidden = false;
   $("machine").dataset.id = m.id;
   $("machine-name").textContent = m.id;
-  badge($("machine-level"), m.alert_level, m.record_count);
+  badge($("machine-level"), machineState(m).level, m.record_count);
   $("machine-updated").textContent = "updated " + when(m.updated_at);
   renderAlert(m);
   renderChannels(m.latest);
   renderGearbox(m);
   renderBaseline(m);
   renderLatest(m);
-  renderFindings(m.latest);
+  renderFindings(m);
   renderPlanning(m);
   const dom = timeDomain(m.trend || []);
-  renderTrend(m, dom);
+  renderTrend(m, dom, findingSeries.get(m.id));
   renderNovelty(m, dom);
 }
 
 /** What a planner reads first on a machine's page: its figures in units, trend verdict, alerts. */
 function renderPlanning(m) {
   const l = m.latest;
-  const parts = figureParts(l);
+  const parts = figureParts(l, m.configuration);
   const pick = (c) => parts.find((p) => p.cls.startsWith(c));
   for (const [id, c] of [["velocity", "velocity"], ["acceleration", "acceleration"]]) {
     const p = pick(c);
-    $(id).textContent = p ? p.text : l ? "– (no unit declared for this channel)" : "–";
+    const z = id === "velocity" && l && l.vibration && l.vibration.iso_20816_3;
+    $(id).textContent = p ? p.text + (z ? " — " + isoScope(z) : "") : l ? "– (no unit declared for this channel)" : "–";
     $(id).title = p ? p.title : "declare the channel's unit: PUT /v1/machines/{id} with channel_units";
   }
   const um = l && l.wear_degree_um;
@@ -284,24 +333,89 @@ function renderPlanning(m) {
   link.hidden = !l;
   if (l) link.href = recordHref(l);
   const verdict = verdictText(m);
-  $("machine-verdict").textContent = verdict ? "Wear trend: " + verdict : "";
+  const series = m.trend_summary && m.trend_summary.series === "novelty" ? "Novelty trend: " : "Wear trend: ";
+  $("machine-verdict").textContent = verdict ? series + verdict : "";
   $("machine-verdict").title = (m.trend_summary && m.trend_summary.verdict) || "";
   const ul = $("machine-alerts");
   ul.innerHTML = "";
   for (const a of (openAlerts || []).filter((x) => x.machine_id === m.id)) {
     const li = h("li", { class: "open-alert level-" + level(a.level) }, ul);
     li.dataset.id = a.id;
+    li.dataset.state = a.state;
     stateTag(a.level, li);
     h("span", {}, li, " alert open since " + when(a.opened_at) + (a.state === "acknowledged"
-      ? ", acknowledged" + (a.acknowledged_by ? " by " + a.acknowledged_by : "") + (a.note ? ": " + a.note : "")
+      ? ", acknowledged" + ackBy(a) + (a.acknowledged_at ? " " + when(a.acknowledged_at) : "") + (a.note ? ": " + a.note : "")
       : ", not acknowledged"));
+    if (a.state === "open" && canAcknowledge) ackForm(li, a);
   }
+}
+
+/** An acknowledgement's author: the key's label (its id when the key is gone). */
+function ackBy(a) {
+  const who = a.acknowledged_by_label || a.acknowledged_by;
+  return who ? " by " + who : "";
+}
+
+/** The acknowledge button with its note, for a key with the `acknowledge` scope. */
+function ackForm(li, a) {
+  const f = h("form", { class: "ack-form" }, li);
+  const input = h("input", { type: "text", name: "note", maxlength: "4000", required: "", placeholder: "what was done, e.g. bearing ordered", "aria-label": "acknowledgement note" }, f);
+  h("button", { type: "submit", class: "ack-button" }, f, "Acknowledge");
+  const err = h("span", { class: "ack-error" }, f);
+  f.addEventListener("submit", async (ev) => {
+    ev.preventDefault();
+    try {
+      await apiPost("/v1/alerts/" + encodeURIComponent(a.id) + "/acknowledge", { note: input.value.trim() });
+      machineDrawn = "";
+      refresh();
+    } catch (e) {
+      err.textContent = e.message;
+    }
+  });
 }
 
 function showMissing(id, message) {
   $("machine").hidden = true;
   $("placeholder").hidden = false;
   $("placeholder").textContent = id ? "Machine " + id + ": " + message : message;
+}
+
+// ---------- per-finding strength series ----------
+
+/** The strength series of the findings that recur, by machine id: `[{name, label, points}]`. */
+const findingSeries = new Map();
+const seriesDrawn = new Map();
+
+/** The findings a machine's page names (the alert's record's, then the latest's), by `kind@shaft`. */
+function namedFindings(m) {
+  const ev = m.open_alert && m.open_alert.evidence;
+  const all = [...((ev && ev.findings) || []), ...((m.latest && m.latest.findings) || [])];
+  const out = new Map();
+  for (const f of all) {
+    if (!f.kind || f.kind === "unexplained") continue;
+    const name = "finding:" + f.kind + (f.shaft ? "@" + f.shaft : "");
+    if (!out.has(name)) out.set(name, f.kind.replace(/-/g, " ") + (f.shaft ? " on " + f.shaft : ""));
+  }
+  return [...out.entries()].slice(0, 4);
+}
+
+/** Fetch the named findings' series when the machine changed; true when they changed. */
+async function refreshFindingSeries(m) {
+  if (hasWear(m)) return false;
+  const stamp = viewStamp(m) + "|" + JSON.stringify(namedFindings(m));
+  if (seriesDrawn.get(m.id) === stamp) return false;
+  seriesDrawn.set(m.id, stamp);
+  const got = await Promise.all(namedFindings(m).map(async ([name, label]) => {
+    try {
+      const t = await api("/v1/machines/" + encodeURIComponent(m.id) + "/trend?series=" + encodeURIComponent(name));
+      return { name, label, points: t.points || [] };
+    } catch (_) {
+      return null;
+    }
+  }));
+  // A finding that recurs: at least two records carry it.
+  findingSeries.set(m.id, got.filter((s) => s && s.points.length >= 2));
+  return true;
 }
 
 // ---------- polling ----------
@@ -327,6 +441,7 @@ async function poll() {
       fetchOpenAlerts(),
     ]);
     openAlerts = alerts;
+    if (canAcknowledge === null) canAcknowledge = await probeAcknowledge();
     await refreshViews(list.machines || []);
     renderMachines(list, gbs.gearboxes);
     renderOverview(list.machines || []);
@@ -349,10 +464,14 @@ async function pollMachine(want) {
     throw e;
   }
   if (want !== selected) return; // the URL moved on meanwhile
-  const drawn = JSON.stringify([m, (openAlerts || []).filter((a) => a.machine_id === m.id)]);
+  const drawn = JSON.stringify([m, (openAlerts || []).filter((a) => a.machine_id === m.id), canAcknowledge]);
   if (drawn !== machineDrawn) {
     machineDrawn = drawn;
     renderMachine(m);
+  }
+  if (await refreshFindingSeries(m) && want === selected) {
+    const dom = timeDomain(m.trend || []);
+    renderTrend(m, dom, findingSeries.get(m.id));
   }
   await refreshProjection(m, m.id + "|" + viewStamp(m));
   if (want !== selected) return;
@@ -371,6 +490,8 @@ async function pollMachine(want) {
 $("keyform").addEventListener("submit", (ev) => {
   ev.preventDefault();
   sessionStorage.setItem("gearwear-key", $("key").value.trim());
+  canAcknowledge = null;
+  machineDrawn = "";
   $("key").value = "";
   $("keyform").hidden = true;
   refresh();

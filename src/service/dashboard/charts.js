@@ -11,9 +11,38 @@ function timeDomain(trend) {
   return [t0 - padT, t1 + padT];
 }
 
-function renderTrend(m, dom) {
-  const svg = $("trend");
+/** Does any of the machine's diagnoses have a wear figure? (Real machines' often do not.) */
+const hasWear = (m) => (m.trend || []).some((p) => num(p.estimate));
+
+/**
+ * The main chart: the wear trend when the machine's records have wear figures; otherwise the
+ * novelty — what a real machine's departure shows — with the per-finding strength series
+ * (`series`, fetched separately) drawn over it. The small second chart is the novelty beside
+ * a wear trend, and is hidden when the novelty is the main chart.
+ */
+function renderTrend(m, dom, series) {
+  const wear = hasWear(m);
+  $("trend-caption").textContent = wear ? "Wear trend" : "Novelty and findings";
+  $("trend-note").textContent = wear
+    ? "estimate with 90 % band on measurement time; gaps where there is no wear figure; thresholds"
+    : "no record of this machine has a wear figure, so this is its departure from the baseline on measurement time: " +
+      "the score, its thresholds, the baseline records, and the strength of each finding that recurs";
+  $("novelty-fig").hidden = !wear;
+  $("trend-legend").innerHTML = "";
+  // The main chart spans the page when it is alone: a wider drawing, so that its text keeps its size.
+  const size = wear ? CHART : WIDE;
+  $("trend").setAttribute("viewBox", "0 0 " + size.W + " " + size.H);
+  if (!wear) {
+    const n = (m.trend || []).length;
+    drawNovelty($("trend"), m, dom, { size, series: series || [], legend: true, empty: n ? null : "no diagnosis yet" });
+    return;
+  }
+  drawWear($("trend"), m, dom);
+}
+
+function drawWear(svg, m, dom) {
   svg.innerHTML = "";
+  svg.dataset.series = "wear";
   const { W, H, pad } = CHART;
   const pts = (m.trend || []).map((p) => ({ ...p, t: Date.parse(measuredAt(p)) })).filter((p) => num(p.t));
   const th = m.thresholds || {};
@@ -29,46 +58,57 @@ function renderTrend(m, dom) {
     }
     el("polyline", { points: run.map((p) => sx(p.t) + "," + sy(p.estimate)).join(" "), fill: "none", stroke: "#1d4ed8", "stroke-width": 2, class: "trend-line" }, svg);
   }
-  for (const p of pts) {
-    if (num(p.estimate)) {
-      // Each point opens its record's diagnosis.
-      const parent = p.diagnosis_id ? el("a", { href: "#/diagnoses/" + encodeURIComponent(p.diagnosis_id) }, svg) : svg;
-      const c = el("circle", { cx: sx(p.t), cy: sy(p.estimate), r: 3.5, fill: "#1d4ed8", class: "trend-point", "data-t": measuredAt(p) }, parent);
-      tooltip(c, when(measuredAt(p)) + ": ea " + p.estimate.toFixed(3) + (num(p.lower) ? " (" + p.lower.toFixed(2) + " … " + p.upper.toFixed(2) + ")" : "") + ", " + p.alert_level);
-    } else {
-      // A diagnosis without a wear figure: a hollow mark on the axis, no line through it (never
-      // a point at 0).
-      const c = el("circle", { cx: sx(p.t), cy: H - pad.b, r: 3.5, fill: "#fff", stroke: "#8a8f98", class: "trend-nowear", "data-t": measuredAt(p) }, svg);
-      tooltip(c, when(measuredAt(p)) + ": no wear figure (the model does not fit the record, or the gearbox's table is not ready), " + p.alert_level);
-    }
+  // A diagnosis without a wear figure gets no mark (never a point at 0): the line breaks there.
+  for (const p of pts.filter((q) => num(q.estimate))) {
+    // Each point opens its record's diagnosis.
+    const parent = p.diagnosis_id ? el("a", { href: "#/diagnoses/" + encodeURIComponent(p.diagnosis_id) }, svg) : svg;
+    const c = el("circle", { cx: sx(p.t), cy: sy(p.estimate), r: 3.5, fill: "#1d4ed8", class: "trend-point", "data-t": measuredAt(p) }, parent);
+    tooltip(c, when(measuredAt(p)) + ": ea " + p.estimate.toFixed(3) + (num(p.lower) ? " (" + p.lower.toFixed(2) + " … " + p.upper.toFixed(2) + ")" : "") + ", " + p.alert_level);
   }
   for (const [name, v, c] of [["warning", th.warning, "var(--warning)"], ["alarm", th.alarm, "var(--alarm)"]]) {
     if (!num(v)) continue;
     el("line", { x1: pad.l, x2: W - pad.r, y1: sy(v), y2: sy(v), stroke: c, "stroke-dasharray": "6 4" }, svg);
-    el("text", { x: W - pad.r - 2, y: sy(v) - 3, "text-anchor": "end", fill: c }, svg, name + " " + v);
+    el("text", { x: pad.l + 4, y: sy(v) - 3, fill: c }, svg, name + " ea " + v);
   }
+  const missing = pts.filter((p) => !num(p.estimate)).length;
   if (!pts.length) note(svg, W, H, "no diagnosis yet");
-  else if (!pts.some((p) => num(p.estimate))) note(svg, W, H, "no wear figure: the model does not fit these records, or the table is not ready");
+  else if (missing) el("text", { x: W - pad.r, y: pad.t - 6, "text-anchor": "end", class: "chart-aside" }, svg, missing + " of " + pts.length + " records without a wear figure");
 }
 
+/** The novelty chart of the machine page's second figure (beside a wear trend). */
 function renderNovelty(m, dom) {
-  const svg = $("novelty");
+  if (!hasWear(m)) { $("novelty").innerHTML = ""; return; }
+  drawNovelty($("novelty"), m, dom, { size: CHART, series: [], legend: false });
+}
+
+/** The main chart's size when it spans the page (the novelty of a machine without wear figures). */
+const WIDE = { W: 900, H: 300, pad: { l: 44, r: 12, t: 22, b: 34 } };
+
+const SERIES_COLOURS = ["#0f766e", "#b45309", "#be185d", "#4338ca"];
+
+/** The baseline records' measurement times (ms), from the machine's `baseline.records`. */
+function baselineTimes(m) {
+  const recs = (m.baseline && m.baseline.records) || [];
+  return new Set(recs.map((r) => Date.parse(r.measured_at || r.received_at)).filter(num));
+}
+
+/**
+ * The novelty score on measurement time in `svg`: the threshold each score was judged by
+ * (warning) and twice it (alarm) as step lines, baseline records in green, scores above the
+ * threshold in red; `opts.series`: `[{name, points: [{t, value}]}]` finding strengths (the
+ * same unit: baseline spreads); `opts.legend` draws a legend.
+ */
+function drawNovelty(svg, m, dom, opts) {
   svg.innerHTML = "";
-  const { W, H, pad } = CHART;
+  svg.dataset.series = "novelty";
+  const { W, H, pad } = opts.size;
   const pts = (m.trend || []).map((p) => ({ ...p, t: Date.parse(measuredAt(p)) })).filter((p) => num(p.t));
   const scored = pts.filter((p) => num(p.novelty));
   const ths = scored.map((p) => p.novelty_threshold).filter(num);
-  const ymax = Math.max(1, ...scored.map((p) => p.novelty), ...ths.map((t) => 2 * t)) * 1.1;
-  const [sx, sy] = timeAxes(svg, W, H, pad, dom[0], dom[1], 0, ymax, "novelty score");
-  const b = m.baseline || {};
-  // The baseline's span in time, shaded, when it falls in the chart.
-  const b0 = Date.parse(b.first_at), b1 = Date.parse(b.last_at);
-  if (num(b0) && num(b1) && b1 >= dom[0] && b0 <= dom[1]) {
-    const x0 = Math.max(pad.l, sx(b0) - 3), x1 = Math.min(W - pad.r, sx(b1) + 3);
-    const r = el("rect", { x: x0, y: pad.t, width: Math.max(2, x1 - x0), height: H - pad.t - pad.b, fill: "#2e9d4f1a", class: "baseline-span" }, svg);
-    tooltip(r, "baseline records: " + when(b.first_at) + " – " + when(b.last_at));
-    el("text", { x: x0 + 2, y: pad.t + 11, fill: "#2e7d46" }, svg, "baseline");
-  }
+  const extra = opts.series.flatMap((s) => s.points.map((p) => p.value));
+  const ymax = Math.max(1, ...scored.map((p) => p.novelty), ...ths.map((t) => 2 * t), ...extra) * 1.1;
+  const [sx, sy] = timeAxes(svg, W, H, pad, dom[0], dom[1], 0, ymax, "score (baseline spreads)");
+  const base = baselineTimes(m);
   // The threshold each score was judged against, as a step line (it changes with the baseline).
   for (const [cls, k, c] of [["novelty-threshold", 1, "var(--warning)"], ["novelty-alarm", 2, "var(--alarm)"]]) {
     for (const run of runs(scored, (p) => num(p.novelty_threshold))) {
@@ -79,25 +119,54 @@ function renderNovelty(m, dom) {
       });
       el("polyline", { points: xy.join(" "), fill: "none", stroke: c, "stroke-dasharray": "6 4", class: cls }, svg);
     }
-    const last = scored[scored.length - 1];
-    if (last && num(last.novelty_threshold)) {
-      el("text", { x: W - pad.r - 2, y: sy(k * last.novelty_threshold) - 3, "text-anchor": "end", fill: c }, svg,
-        (k === 1 ? "threshold " : "alarm ") + (k * last.novelty_threshold).toFixed(2));
-    }
   }
+  opts.series.forEach((s, i) => {
+    const c = SERIES_COLOURS[i % SERIES_COLOURS.length];
+    const sp = s.points.map((p) => ({ ...p, t: Date.parse(p.measured_at) })).filter((p) => num(p.t) && num(p.value));
+    el("polyline", { points: sp.map((p) => sx(p.t) + "," + sy(p.value)).join(" "), fill: "none", stroke: c, "stroke-width": 1.5, class: "finding-series", "data-name": s.name }, svg);
+    for (const p of sp) {
+      tooltip(el("rect", { x: sx(p.t) - 2.5, y: sy(p.value) - 2.5, width: 5, height: 5, fill: c, class: "finding-point" }, svg),
+        when(p.measured_at) + ": " + s.label + " strength " + p.value.toFixed(1));
+    }
+  });
   for (const run of runs(pts, (p) => num(p.novelty))) {
     el("polyline", { points: run.map((p) => sx(p.t) + "," + sy(p.novelty)).join(" "), fill: "none", stroke: "#7c3aed", "stroke-width": 2, class: "novelty-line" }, svg);
   }
   for (const p of scored) {
     const over = num(p.novelty_threshold) && p.novelty > p.novelty_threshold;
-    const c = el("circle", { cx: sx(p.t), cy: sy(p.novelty), r: 3.5, fill: over ? "var(--alarm)" : "#7c3aed", class: "novelty-point" + (over ? " anomalous" : ""), "data-t": measuredAt(p) }, svg);
-    tooltip(c, when(measuredAt(p)) + ": novelty " + p.novelty.toFixed(2) + (num(p.novelty_threshold) ? " (threshold " + p.novelty_threshold.toFixed(2) + ")" : "") + ", " + p.alert_level);
+    const inBase = base.has(p.t);
+    const parent = p.diagnosis_id ? el("a", { href: "#/diagnoses/" + encodeURIComponent(p.diagnosis_id) }, svg) : svg;
+    const c = el("circle", { cx: sx(p.t), cy: sy(p.novelty), r: 3.5, fill: inBase ? "#2e9d4f" : over ? "var(--alarm)" : "#7c3aed",
+      class: "novelty-point" + (over ? " anomalous" : "") + (inBase ? " baseline-point" : ""), "data-t": measuredAt(p) }, parent);
+    tooltip(c, when(measuredAt(p)) + ": novelty " + p.novelty.toFixed(2) + (num(p.novelty_threshold) ? " (threshold " + p.novelty_threshold.toFixed(2) + ")" : "") +
+      ", " + p.alert_level + (inBase ? ", baseline record" : ""));
   }
-  if (!scored.length) {
+  // Baseline records the chart has no score for (the first ones: nothing to score them against).
+  for (const t of base) {
+    if (t < dom[0] || t > dom[1] || scored.some((p) => p.t === t)) continue;
+    tooltip(el("path", { d: "M" + (sx(t) - 4) + "," + (H - pad.b) + "l4,-7l4,7z", fill: "#2e9d4f", class: "baseline-mark" }, svg), "baseline record, " + when(new Date(t).toISOString()));
+  }
+  if (opts.legend) noveltyLegend($("trend-legend"), opts.series);
+  if (opts.empty) note(svg, W, H, opts.empty);
+  else if (!scored.length) {
+    const b = m.baseline || {};
     const need = Math.max(0, (b.min_records || 3) - (b.count || 0));
     note(svg, W, H, b.ready
       ? "baseline ready: records from now on get a novelty score"
       : "no novelty yet: the baseline needs " + need + " more healthy record" + (need === 1 ? "" : "s"));
+  }
+}
+
+/** The main chart's legend (HTML, under the chart): the score, the thresholds, the baseline, the findings. */
+function noveltyLegend(ul, series) {
+  ul.innerHTML = "";
+  const items = [["novelty score", "#7c3aed", "line"], ["warning: the baseline's threshold", "var(--warning)", "dash"],
+    ["alarm: twice the threshold", "var(--alarm)", "dash"], ["baseline record", "#2e9d4f", "dot"]]
+    .concat(series.map((s, i) => [s.label + " (strength)", SERIES_COLOURS[i % SERIES_COLOURS.length], "square"]));
+  for (const [text, c, kind] of items) {
+    const li = h("li", { class: "legend-" + kind }, ul);
+    h("span", { class: "swatch " + kind, style: (kind === "dash" ? "border-color: " : "background: ") + c }, li);
+    h("span", {}, li, text);
   }
 }
 

@@ -26,11 +26,13 @@ function key() { return sessionStorage.getItem("gearwear-key") || ""; }
 
 async function api(path) {
   const headers = {};
-  if (key()) headers["Authorization"] = "Bearer " + key();
+  const sent = key();
+  if (sent) headers["Authorization"] = "Bearer " + sent;
   const r = await fetch(path, { headers, cache: "no-cache" });
   if (r.status === 401 || r.status === 403) {
-    // No key, a wrong or revoked one (401), or one without the read scope (403): ask.
-    if (r.status === 401) sessionStorage.removeItem("gearwear-key");
+    // No key, a wrong or revoked one (401), or one without the read scope (403): ask. A
+    // request sent before a key was entered does not forget the key entered meanwhile.
+    if (r.status === 401 && key() === sent) sessionStorage.removeItem("gearwear-key");
     $("keyform").hidden = false;
     const p = await r.json().catch(() => ({}));
     throw Object.assign(new Error(p.detail || "a read key is needed"), { status: r.status });
@@ -40,6 +42,33 @@ async function api(path) {
     throw Object.assign(new Error(p.detail || ("HTTP " + r.status)), { status: r.status });
   }
   return r.json();
+}
+
+/** POST a JSON body; the answer, or an Error with the problem's detail (never a key prompt). */
+async function apiPost(path, body) {
+  const headers = { "Content-Type": "application/json" };
+  if (key()) headers["Authorization"] = "Bearer " + key();
+  const r = await fetch(path, { method: "POST", headers, body: JSON.stringify(body) });
+  const p = await r.json().catch(() => ({}));
+  if (!r.ok) throw Object.assign(new Error(p.detail || ("HTTP " + r.status)), { status: r.status });
+  return p;
+}
+
+/**
+ * May the key in use acknowledge alerts? Asked once per key: the acknowledge endpoint checks
+ * the key's scope before it reads the body, so an empty body answers 400 for a key with the
+ * `acknowledge` scope (and acknowledges nothing), 401/403 for one without.
+ */
+let canAcknowledge = null;
+async function probeAcknowledge() {
+  const headers = { "Content-Type": "application/json" };
+  if (key()) headers["Authorization"] = "Bearer " + key();
+  try {
+    const r = await fetch("/v1/alerts/-/acknowledge", { method: "POST", headers, body: "{}" });
+    return r.status === 400;
+  } catch (_) {
+    return false;
+  }
 }
 
 // ---------- small helpers ----------

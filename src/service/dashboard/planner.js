@@ -81,16 +81,30 @@ function byUrgency(machines) {
 
 // ---------- figures in words ----------
 
-/** `4.21 mm/s (ISO B)`, the acceleration and the wear in µm: the latest record's figures. */
-function figureParts(d) {
+/** The ISO 20816-3 class a machine declared, in words with the standard's scope. */
+function isoScope(z) {
+  return "ISO 20816-3 (machines above 15 kW; group " + z.group + ", " + z.support + " support)";
+}
+
+/**
+ * `4.21 mm/s (ISO B)`, the acceleration and the wear in µm: the latest record's figures. The
+ * zone only for a machine that declared its ISO class (`cfg.iso_20816`); with a class but no
+ * velocity in units, "zone unknown".
+ */
+function figureParts(d, cfg) {
   const out = [];
   const v = d && d.vibration;
+  const iso = cfg && cfg.iso_20816;
   if (v && num(v.velocity_rms_mm_s)) {
     const z = v.iso_20816_3;
     out.push({ cls: "velocity", text: v.velocity_rms_mm_s.toFixed(2) + " mm/s RMS" + (z ? " · ISO zone " + z.zone : ""),
-      title: "velocity RMS over " + (v.velocity_band_hz || [10, 1000]).join("–") + " Hz" + (z ? "; zone " + z.zone + ": " + z.meaning : "") });
+      title: "velocity RMS over " + (v.velocity_band_hz || [10, 1000]).join("–") + " Hz" + (z ? "; " + isoScope(z) + " zone " + z.zone + ": " + z.meaning : "") });
   } else if (v && v.velocity_note) {
     out.push({ cls: "velocity muted", text: "no velocity", title: v.velocity_note });
+  } else if (d && iso) {
+    out.push({ cls: "velocity muted", text: "ISO zone unknown: sensor gain not stated",
+      title: "the machine declares its ISO 20816-3 class, but the deciding channel " + (d.channel || "") +
+        " has no unit: declare it in channel_units (with the sensor's sensitivity for a channel in V)" });
   }
   if (v && num(v.acceleration_rms_m_s2)) {
     out.push({ cls: "acceleration", text: v.acceleration_rms_m_s2.toFixed(2) + " m/s² RMS, peak " + fmt(v.acceleration_peak_m_s2, 1) + " m/s²",
@@ -159,7 +173,7 @@ function fleetRow(tb, m, u, view) {
   h("a", { href: machineHref(m.id), class: "machine-link" }, h("td", {}, tr), m.id);
   const l = view && view.latest;
   const fig = h("td", { class: "figures" }, tr);
-  const parts = figureParts(l);
+  const parts = figureParts(l, view && view.configuration);
   for (const p of parts) h("div", { class: p.cls, title: p.title }, fig, p.text);
   if (!parts.length) h("span", { class: "muted" }, fig, l ? (l.wear_note ? "no wear figure (poor fit)" : "no figure in units") : "no record yet");
   const verdict = verdictText(view);
@@ -167,13 +181,33 @@ function fleetRow(tb, m, u, view) {
   if (view && view.trend_summary && view.trend_summary.verdict) tdv.title = view.trend_summary.verdict;
   if (!verdict) tdv.classList.add("muted");
   const tdf = h("td", { class: "findings-cell" }, tr);
-  const fs = (l && Array.isArray(l.findings)) ? l.findings : [];
-  for (const f of fs.slice(0, 2)) codeText(h("div", { class: "finding" }, tdf), f.summary || f.kind || "");
-  if (fs.length > 2) h("div", { class: "muted" }, tdf, "+" + (fs.length - 2) + " more");
-  if (!fs.length) h("span", { class: "muted" }, tdf, l ? "none" : "–");
+  // What the open alert is about (the record that opened or last escalated it), then the
+  // latest record's findings when it is another record.
+  const ev = view && view.open_alert && view.open_alert.evidence;
+  if (ev) {
+    findingLines(tdf, ev.findings, "alert-finding", level(view.open_alert.level) + " (record of " + when(ev.measured_at) + "): ");
+    if (ev.record_id !== (l && l.record_id)) findingLines(tdf, l && l.findings, "latest-finding", "latest: ");
+  } else {
+    findingLines(tdf, l && l.findings, "latest-finding", "");
+    if (!(l && l.findings && l.findings.length)) {
+      tdf.innerHTML = "";
+      h("span", { class: "muted" }, tdf, l ? "none" : "–");
+    }
+  }
   const tdr = h("td", { class: "last-record" }, tr);
   if (l) h("a", { href: recordHref(l), class: "record-link" }, tdr, when(measuredAt(l)));
   else h("span", { class: "muted" }, tdr, "–");
+}
+
+/** Up to two findings as lines, `prefix` first, "+N more", or "none" after the prefix. */
+function findingLines(td, findings, cls, prefix) {
+  const fs = Array.isArray(findings) ? findings : [];
+  if (!fs.length) {
+    if (prefix) h("div", { class: "muted " + cls }, td, prefix + "no finding");
+    return;
+  }
+  fs.slice(0, 2).forEach((f, i) => codeText(h("div", { class: "finding " + cls }, td), (i ? "" : prefix) + (f.summary || f.kind || "")));
+  if (fs.length > 2) h("div", { class: "muted" }, td, "+" + (fs.length - 2) + " more");
 }
 
 /** The open alerts, most severe then oldest first; hidden when the service has no alerts API. */
@@ -195,7 +229,7 @@ function renderAlerts(alerts) {
     h("a", { href: machineHref(a.machine_id), class: "machine-link" }, li, a.machine_id);
     h("span", { class: "muted" }, li, "opened " + when(a.opened_at));
     const ack = a.state === "acknowledged"
-      ? "acknowledged" + (a.acknowledged_by ? " by " + a.acknowledged_by : "") + (a.acknowledged_at ? " " + when(a.acknowledged_at) : "") +
+      ? "acknowledged" + ackBy(a) + (a.acknowledged_at ? " " + when(a.acknowledged_at) : "") +
         (a.note ? ": " + a.note : "")
       : "not acknowledged";
     h("span", { class: "ack " + (a.state === "acknowledged" ? "acked" : "unacked") }, li, ack);

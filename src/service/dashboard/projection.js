@@ -130,6 +130,13 @@ function drawCrossing(svg, c, sx, sy, t1) {
 let projectionFor = "";
 async function refreshProjection(m, stamp) {
   if (projectionFor === stamp) return;
+  if (!hasWear(m)) {
+    // No wear figure to project (a real machine the model does not fit): no empty chart; the
+    // main chart shows its novelty instead.
+    projectionFor = stamp;
+    renderProjection(null);
+    return;
+  }
   let tr = null;
   try {
     tr = await api("/v1/machines/" + encodeURIComponent(m.id) + "/trend?series=wear");

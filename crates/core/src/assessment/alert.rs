@@ -68,6 +68,26 @@ pub struct Alert {
     pub reason: String,
 }
 
+/// Why a channel that neither a wear degree nor a baseline vouches for is `unknown`, and what
+/// to do: a baseline always helps; while the gearbox's table is being computed (`table_note`)
+/// the gearbox is described already and a wear degree follows when the table is ready.
+fn unknown_reason(fit_note: &str, table_pending: bool) -> String {
+    let why = if fit_note.is_empty() {
+        "no wear degree is available"
+    } else {
+        fit_note
+    };
+    let then = if table_pending {
+        "; the wear degree follows when the table is ready"
+    } else {
+        ""
+    };
+    format!(
+        "{why}, and the machine has no baseline yet: post at least 3 healthy records with \
+         ?baseline=true so that later records are judged against them{then}"
+    )
+}
+
 /// The alert of one channel.
 ///
 /// `wear`: `(estimate, poor_fit, chi2_per_feature)` when the gearbox's table gave a wear
@@ -120,17 +140,7 @@ pub fn alert(
         (None, None) => Alert {
             level: Level::Unknown,
             basis: Basis::None,
-            reason: format!(
-                "{}{}and the machine has no baseline: add a baseline (POST at least 3 healthy \
-                 records with ?baseline=true) or describe the gearbox (PUT /v1/gearboxes/{{id}}, \
-                 then PUT /v1/machines/{{id}} with it)",
-                if fit_note.is_empty() {
-                    "no wear degree is available ".to_string()
-                } else {
-                    fit_note.clone()
-                },
-                if fit_note.is_empty() { "" } else { ", " }
-            ),
+            reason: unknown_reason(&fit_note, table_note.is_some()),
         },
         (Some(w), None) => Alert {
             level: w,

@@ -486,13 +486,15 @@ fn read_table(
         .or(facts.shaft_hz);
     let mut r = match d.read_with(rec, shaft_hz, machine.calibration, track_orders) {
         Ok(r) => r,
-        Err(e @ crate::Error::SpeedOutOfBand { .. }) if has_baseline || facts.declared_healthy => {
+        Err(crate::Error::SpeedOutOfBand {
+            f1_hz,
+            min_hz,
+            max_hz,
+            ..
+        }) if has_baseline || facts.declared_healthy => {
             return Ok((
                 None,
-                Some(format!(
-                    "no wear figure: {e}; precompute the table over the machine's speeds \
-                     (gearwear precompute --input-hz LO:HI:STEP)"
-                )),
+                Some(speed_outside_table(f1_hz, min_hz, max_hz, machine)),
             ));
         }
         Err(e) => return Err(e),
@@ -508,6 +510,20 @@ fn read_table(
         r.diagnosis.wear_note = Some(why);
     }
     Ok((Some(r), None))
+}
+
+/// Why a record run at a speed the gearbox's signature table does not cover has no wear
+/// figure, in input-shaft speeds (mesh frequencies `f1_hz`, `lo_hz`–`hi_hz` converted).
+fn speed_outside_table(f1_hz: f64, lo_hz: f64, hi_hz: f64, machine: &Machine) -> String {
+    let per = machine.gearbox.f1_per_input_hz;
+    format!(
+        "no wear figure: the input shaft ran at {:.2} Hz, outside the speeds the gearbox's \
+         signature table covers ({:.2}–{:.2} Hz); the machine's baseline judges this record — \
+         a wear figure at this speed needs the table computed over the machine's speeds",
+        f1_hz / per,
+        lo_hz / per,
+        hi_hz / per
+    )
 }
 
 /// The channel's features: description-free ones, the per-shaft TSA (from the measured angle

@@ -102,6 +102,17 @@ fn region_words(region: &str) -> String {
     }
 }
 
+/// A novelty feature's departure in words: what it is ([`why`]) and how far from the healthy
+/// records it is (`z`: baseline spreads, its sign the direction).
+pub fn departure_words(feature: &str, z: f64) -> String {
+    format!(
+        "{}: {} by {:.1}× the healthy spread",
+        why(feature),
+        if z >= 0.0 { "up" } else { "down" },
+        z.abs()
+    )
+}
+
 /// Why a feature points where it does, in words.
 pub fn why(feature: &str) -> String {
     let parts: Vec<&str> = feature.split('.').collect();
@@ -138,6 +149,18 @@ pub fn why(feature: &str) -> String {
         ["tsa", s, m] => format!(
             "the time-synchronous average of `{s}` turned impulsive ({m}): a tooth on it hits \
              differently once per revolution"
+        ),
+        ["stat", "ln_rms" | "rms"] => "the overall vibration level (RMS)".into(),
+        ["stat", "ln_kurtosis" | "kurtosis"] => {
+            "the record's kurtosis (how impulsive it is)".into()
+        }
+        ["stat", "ln_crest" | "crest"] => "the crest factor (peaks over RMS)".into(),
+        ["order", "ln_sync_share"] => {
+            "the share of the vibration that repeats with the input shaft".into()
+        }
+        ["band", f] if f.ends_with("hz") => format!(
+            "the power in the third-octave band around {} Hz",
+            f.trim_end_matches("hz")
         ),
         _ => format!("{feature} departs from the baseline at this state"),
     }
@@ -394,9 +417,9 @@ fn unexplained(ex: &Explanation, score: &StateScore, found: &[Finding]) -> Optio
         strength: rms,
         share,
         summary: format!(
-            "unexplained: {} departs from the healthy baseline at this speed and load",
+            "unexplained: {} depart from the healthy baseline at this speed and load",
             left.iter()
-                .map(|e| format!("{} ({})", e.feature, e.change))
+                .map(|e| format!("{} ({})", why(&e.feature), e.change))
                 .collect::<Vec<_>>()
                 .join(", ")
         ),
@@ -565,6 +588,12 @@ mod tests {
         let out = findings(&score(&f, &[("stat.kurtosis", 1.5)]), &parts(), None);
         assert_eq!(out.len(), 1, "{out:#?}");
         assert_eq!(out[0].kind, "unexplained");
-        assert!(out[0].summary.contains("stat.kurtosis"));
+        // In words, not the feature's code.
+        let summary = &out[0].summary;
+        assert!(
+            summary.contains("the record's kurtosis (how impulsive it is)"),
+            "{summary}"
+        );
+        assert!(!summary.contains("stat.kurtosis"), "{summary}");
     }
 }
