@@ -6,13 +6,12 @@
 //! locked), so two replicas or a crash and a retry cannot open an episode twice — and a unique
 //! index allows at most one episode per machine that is not closed.
 
+use super::StoreResult;
+pub use super::alert_rows::AlertRow;
+use crate::events::{DiagnosisEvent, Event, QueuedEvent};
 use async_trait::async_trait;
 use gearwear_core::assessment::Level;
 use gearwear_core::assessment::episodes::EpisodePolicy;
-use serde::{Deserialize, Serialize};
-
-use super::StoreResult;
-use crate::events::{DiagnosisEvent, Event, QueuedEvent};
 
 /// What the ingest needs to advance a machine's episode with one record.
 #[derive(Debug, Clone)]
@@ -22,29 +21,6 @@ pub struct AlertInput {
     /// The record's measurement time, unix ms (`recorded_at` if given, else received).
     pub measured_at: i64,
     pub policy: EpisodePolicy,
-}
-
-/// One episode.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct AlertRow {
-    pub id: String,
-    pub machine_id: String,
-    /// `warning` or `alarm`.
-    pub level: Level,
-    /// `open`, `acknowledged` or `closed`.
-    pub state: String,
-    pub opened_at: i64,
-    /// The record that opened it.
-    pub record_id: String,
-    pub acknowledged_at: Option<i64>,
-    /// The API key (id) that acknowledged it.
-    pub acknowledged_by: Option<String>,
-    pub note: Option<String>,
-    pub closed_at: Option<i64>,
-    pub closed_record_id: Option<String>,
-    pub peak_severity: f64,
-    /// When the service stored it (unix ms, wall clock).
-    pub created_at: i64,
 }
 
 /// One line of an episode's audit trail.

@@ -5,8 +5,7 @@
 use gearwear_core::assessment::Level;
 use serde::{Deserialize, Serialize};
 
-use crate::alerts::AlertRow;
-use crate::ingest::Ingest;
+use crate::alert_rows::AlertRow;
 use crate::machines::MachineDeletion;
 
 /// The version of [`QueuedEvent`] this build writes and reads.
@@ -123,31 +122,6 @@ pub struct Novelty {
 }
 
 impl DiagnosisEvent {
-    /// The diagnosis of an ingest, with the ingest's extras.
-    pub fn of(ing: &Ingest) -> Self {
-        let d = &ing.diagnosis;
-        DiagnosisEvent {
-            machine_id: d.machine_id.clone(),
-            diagnosis_id: d.id.clone(),
-            record_id: d.record_id.clone(),
-            created_at: d.created_at,
-            measured_at: d.measured_at,
-            wear: d.has_wear.then_some(Interval {
-                estimate: d.ea_estimate,
-                lower: d.ea_lower,
-                upper: d.ea_upper,
-            }),
-            alert_level: d.alert_level,
-            motion_state: d.motion_state.clone(),
-            novelty: d
-                .novelty_score
-                .zip(d.novelty_threshold)
-                .map(|(score, threshold)| Novelty { score, threshold }),
-            channel: d.channel.clone(),
-            extras: ing.event_extras.clone(),
-        }
-    }
-
     /// The record behind it.
     pub fn record(&self) -> RecordRef {
         RecordRef {

@@ -6,6 +6,7 @@ use async_trait::async_trait;
 use super::StoreResult;
 use super::alerts::AlertInput;
 use super::diagnoses::DiagnosisRow;
+use super::events::DiagnosisEvent;
 
 /// An accepted record's metadata, features and (optionally) raw samples.
 #[derive(Debug, Clone)]
@@ -64,6 +65,33 @@ pub struct Ingest {
     pub alert: Option<AlertInput>,
 }
 
+impl Ingest {
+    /// The diagnosis as its events carry it, with the service's extras.
+    pub fn diagnosis_event(&self) -> DiagnosisEvent {
+        let (ing, d) = (self, &self.diagnosis);
+        DiagnosisEvent {
+            machine_id: d.machine_id.clone(),
+            diagnosis_id: d.id.clone(),
+            record_id: d.record_id.clone(),
+            created_at: d.created_at,
+            measured_at: d.measured_at,
+            wear: d.has_wear.then_some(crate::events::Interval {
+                estimate: d.ea_estimate,
+                lower: d.ea_lower,
+                upper: d.ea_upper,
+            }),
+            alert_level: d.alert_level,
+            motion_state: d.motion_state.clone(),
+            novelty: d
+                .novelty_score
+                .zip(d.novelty_threshold)
+                .map(|(score, threshold)| crate::events::Novelty { score, threshold }),
+            channel: d.channel.clone(),
+            extras: ing.event_extras.clone(),
+        }
+    }
+}
+
 /// Accepted records and the answers to idempotency keys.
 #[async_trait]
 pub trait IngestStore: Send + Sync {
@@ -84,7 +112,7 @@ macro_rules! ingest_sql {
     ($store:ident, $db:ty) => {
         use super::alerts::step_in;
         use super::webhooks::queue_events;
-        use $crate::events::{DiagnosisEvent, Event, QueuedEvent};
+        use $crate::events::{Event, QueuedEvent};
         use super::$store;
         use sqlx::Row;
         use $crate::*;
@@ -182,7 +210,7 @@ macro_rules! ingest_sql {
             .bind(rec.baseline as i64)
             .execute(&mut **tx)
             .await?;
-            let diagnosis = DiagnosisEvent::of(ing);
+            let diagnosis = ing.diagnosis_event();
             let mut events = Vec::new();
             if let Some(a) = &ing.alert {
                 let step = step_in(tx, &rec.machine_id, &rec.id, a, &diagnosis, rec.received_at);

@@ -78,6 +78,7 @@ macro_rules! backend {
 }
 pub(crate) use backend;
 
+pub mod alert_rows;
 pub mod alerts;
 pub mod baselines;
 pub mod calibration;
