@@ -67,8 +67,10 @@ impl Driver {
             if !(v.is_null() || v == json!(false)) {
                 return v;
             }
+            // Generous: on the 2-core CI machine the browser tests share it with every
+            // other test; the page polls every 2 s.
             assert!(
-                t.elapsed() < Duration::from_secs(20),
+                t.elapsed() < Duration::from_secs(60),
                 "the page never showed {what}"
             );
             tokio::time::sleep(Duration::from_millis(200)).await;
