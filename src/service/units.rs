@@ -21,7 +21,7 @@ use super::error::{ApiError, ApiResult};
 use crate::store::MachineRow;
 use crate::units::{
     ANY_CHANNEL, ChannelUnits, IsoClass, IsoDeclared, MachineUnits, Refusal, UnitError, UnitSpec,
-    check_declared,
+    check_declared, quoted,
 };
 
 /// `iso_20816` of a machine's configuration.
@@ -51,11 +51,7 @@ pub fn problem(r: &Refusal) -> ApiError {
         Refusal::NotDiagnosed { channel, diagnosed } => format!(
             "the machine diagnoses only the channels {} (`channels`): a unit for `{channel}` \
              would never be used; name one of them, or \"{ANY_CHANNEL}\" for all",
-            diagnosed
-                .iter()
-                .map(|c| format!("`{c}`"))
-                .collect::<Vec<_>>()
-                .join(", ")
+            quoted(diagnosed)
         ),
         Refusal::IsoWithoutUnits => format!("{r} in `channel_units`"),
         _ => r.to_string(),

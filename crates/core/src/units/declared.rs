@@ -81,8 +81,8 @@ impl Refusal {
     }
 }
 
-/// `` `a`, `b` ``.
-fn quoted(names: &[String]) -> String {
+/// `` `a`, `b` ``: channel names as the refusals list them.
+pub fn quoted(names: &[String]) -> String {
     names
         .iter()
         .map(|c| format!("`{c}`"))

@@ -30,7 +30,7 @@ use serde::{Deserialize, Serialize};
 
 pub use crate::error::UnitError;
 pub use crate::signal::velocity::Kinematic;
-pub use declared::{IsoDeclared, Refusal, check_declared};
+pub use declared::{IsoDeclared, Refusal, check_declared, quoted};
 pub use iso::{IsoClass, IsoZone, Support, Zone};
 pub use vibration::{Vibration, WearUm, vibration};
 
