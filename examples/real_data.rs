@@ -78,11 +78,18 @@ fn f2(v: Option<f64>) -> String {
     v.map_or("–".into(), |v| format!("{v:.2}"))
 }
 
+#[path = "real_data/calibration.rs"]
+mod calibration;
 #[path = "real_data/phm.rs"]
 mod phm;
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
+    match args.first().map(String::as_str) {
+        Some("helical-model") => return calibration::run(&phm::HELICAL),
+        Some("spur-model") => return calibration::run(&phm::SPUR),
+        _ => {}
+    }
     let trains: Vec<&phm::Train> = match args.first().map(String::as_str) {
         Some("helical") => vec![&phm::HELICAL],
         Some("spur") => vec![&phm::SPUR],

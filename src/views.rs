@@ -3,10 +3,22 @@
 
 use serde_json::{Map, Value, json};
 
+use crate::condition::StateBaseline;
 use crate::gearbox::Gearbox;
 use crate::store::events::{DiagnosisEvent, Event, QueuedEvent};
 use crate::store::{AlertEventRow, AlertRow, DiagnosisRow, GearboxRow};
 use crate::time::rfc3339;
+
+/// A channel's calibrated machine model ([`crate::condition::machine_model`]): its report
+/// when it was accepted, the reason when it was refused, `null` when the baseline's records
+/// carry no line levels (stored before line levels were kept).
+pub fn machine_model_json(b: &StateBaseline) -> Value {
+    match b.model() {
+        Some(Ok(m)) => json!({"status": "calibrated", "report": m.report}),
+        Some(Err(e)) => json!({"status": "refused", "reason": e.to_string()}),
+        None => Value::Null,
+    }
+}
 
 /// An episode (without its audit trail).
 pub fn alert_json(a: &AlertRow) -> Value {

@@ -33,15 +33,15 @@ const LOADS: [&str; 2] = ["High", "Low"];
 pub struct Train {
     pub name: &'static str,
     prefix: &'static str,
-    dir_env: &'static str,
-    default_dir: &'static str,
-    config: &'static str,
+    pub dir_env: &'static str,
+    pub default_dir: &'static str,
+    pub config: &'static str,
     table: &'static str,
     cases: u32,
     /// Shafts carrying a damaged gear, per case (empty: no gear damage).
-    gear_shafts: fn(u32) -> &'static [&'static str],
+    pub gear_shafts: fn(u32) -> &'static [&'static str],
     /// Shafts carrying any labelled fault (gear, bearing, shaft), per case.
-    fault_shafts: fn(u32) -> &'static [&'static str],
+    pub fault_shafts: fn(u32) -> &'static [&'static str],
 }
 
 /// The helical train (README of its data).
@@ -95,15 +95,15 @@ pub const SPUR: Train = Train {
     },
 };
 
-struct File {
-    case: u32,
-    speed: u32,
-    load: &'static str,
-    run: u32,
-    path: PathBuf,
+pub struct File {
+    pub case: u32,
+    pub speed: u32,
+    pub load: &'static str,
+    pub run: u32,
+    pub path: PathBuf,
 }
 
-fn files(t: &Train, dir: &Path) -> Vec<File> {
+pub fn files(t: &Train, dir: &Path) -> Vec<File> {
     let mut v = Vec::new();
     for case in 1..=t.cases {
         for speed in SPEEDS {
@@ -127,12 +127,12 @@ fn files(t: &Train, dir: &Path) -> Vec<File> {
     v
 }
 
-fn manifest(p: &str) -> PathBuf {
+pub fn manifest(p: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
 }
 
 /// A file's channels `(name, samples)` and its facts.
-fn load(f: &File, tacho: bool, healthy: bool) -> (Vec<(String, Vec<f64>)>, RecordFacts) {
+pub fn load(f: &File, tacho: bool, healthy: bool) -> (Vec<(String, Vec<f64>)>, RecordFacts) {
     let opts = ReadOptions {
         sample_rate: Some(FS),
         ..Default::default()
@@ -157,9 +157,9 @@ fn load(f: &File, tacho: bool, healthy: bool) -> (Vec<(String, Vec<f64>)>, Recor
     (channels, facts)
 }
 
-const CHOSEN: [usize; 2] = [0, 1];
+pub const CHOSEN: [usize; 2] = [0, 1];
 
-fn machine<'a>(
+pub fn machine<'a>(
     t: &Train,
     gb: &'a Gearbox,
     diagnoser: Option<&'a TableDiagnoser>,

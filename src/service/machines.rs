@@ -38,6 +38,7 @@ use crate::novelty::{MIN_BASELINE_RECORDS, RecordFeatures};
 use crate::signature::TableStatus;
 use crate::store::{GearboxRow, MachineConfig, MachineRow, now_ms};
 use crate::time::rfc3339;
+use crate::views::machine_model_json;
 
 /// Largest configuration or baseline request body.
 const SMALL_BODY: usize = 64 * 1024;
@@ -464,6 +465,7 @@ pub async fn baseline_json(app: &AppState, m: &MachineRow) -> ApiResult<Value> {
                     "threshold": st.map(|s| s.threshold()).or(p.map(|p| p.threshold)),
                     "state_aware": st.is_some(),
                     "coverage": st.map(|s| s.coverage()),
+                    "model": st.map(machine_model_json),
                 }),
             )
         })

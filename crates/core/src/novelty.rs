@@ -102,6 +102,10 @@ pub struct RecordFeatures {
     /// fits only records of the current one.
     #[serde(default)]
     pub evidence_version: u32,
+    /// The marked lines' levels ([`crate::condition::Evidence::lines`]): what the machine's
+    /// model is calibrated on ([`crate::condition::machine_model`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub lines: Vec<crate::condition::machine_model::LineLevel>,
 }
 
 impl RecordFeatures {

@@ -153,6 +153,7 @@ pub fn add_evidence(
         Ok(ev) => {
             features.evidence = ev.values;
             features.evidence_spread = ev.spread;
+            features.lines = ev.lines;
             features.evidence_version = crate::condition::EVIDENCE_VERSION;
             if let (Some(note), Some(o)) = (ev.note, features.indicators.as_object_mut()) {
                 o.insert("evidence_note".into(), note.into());
@@ -233,6 +234,7 @@ pub fn state_baseline(features: &[RecordFeatures]) -> Option<Result<StateBaselin
                 state: f.state.clone()?,
                 values: f.evidence.clone(),
                 spread: f.evidence_spread.clone(),
+                lines: f.lines.clone(),
             })
         })
         .collect();

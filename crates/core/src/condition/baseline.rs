@@ -26,6 +26,7 @@ use serde::{Deserialize, Serialize};
 
 pub use super::calibration::{Departure, MIN_THRESHOLD, TOP_K};
 use super::calibration::{Within, across_scales, across_spread, departures, score_of, threshold};
+use super::machine_model::{LineLevel, MachineModel, Observed, Refused};
 use super::state::{Load, OperatingState};
 use crate::{Error, Result};
 use std::collections::BTreeMap;
@@ -47,6 +48,9 @@ pub struct StateRecord {
     /// Each feature's noise in the record ([`super::evidence::Evidence::spread`]).
     #[serde(default)]
     pub spread: BTreeMap<String, f64>,
+    /// Its marked lines' levels: what the machine's model is calibrated on.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub lines: Vec<LineLevel>,
 }
 
 /// What a baseline covers at one load.
@@ -74,8 +78,11 @@ pub struct Reference {
     pub values: BTreeMap<String, f64>,
     /// Speeds (Hz) of the baseline records it comes from.
     pub from_hz: Vec<f64>,
-    /// `same-state`, `interpolated` or `nearest`.
+    /// `same-state`, `interpolated`, `nearest` or `model`.
     pub how: &'static str,
+    /// The model's prediction uncertainty of the features it moved (ln units; `model` only):
+    /// added in quadrature to their scale.
+    pub uncertainty: BTreeMap<String, f64>,
 }
 
 /// A record judged against its state's reference.
@@ -84,7 +91,7 @@ pub struct StateScore {
     pub score: f64,
     pub threshold: f64,
     pub anomalous: bool,
-    /// `same-state`, `interpolated` or `nearest`.
+    /// `same-state`, `interpolated`, `nearest` or `model`.
     pub reference: &'static str,
     /// Baseline speeds (Hz) the reference comes from.
     pub reference_hz: Vec<f64>,
@@ -109,6 +116,9 @@ pub struct StateBaseline {
     /// Scales of a record between baseline states.
     across: BTreeMap<String, f64>,
     across_threshold: f64,
+    /// The machine's model calibrated on the records' line levels (`None`: no record carries
+    /// them).
+    model: Option<Result<MachineModel, Refused>>,
 }
 
 fn candidates<'a>(records: &'a [StateRecord], load: Option<&Load>) -> Vec<&'a StateRecord> {
@@ -150,6 +160,7 @@ fn reference(cands: &[&StateRecord], f: f64, any_distance: bool) -> Option<Refer
             values: mean_of(&same),
             from_hz: same.iter().map(|r| r.state.shaft_hz).collect(),
             how: "same-state",
+            uncertainty: BTreeMap::new(),
         });
     }
     let below = cands.iter().rev().find(|r| r.state.shaft_hz < f);
@@ -168,6 +179,7 @@ fn reference(cands: &[&StateRecord], f: f64, any_distance: bool) -> Option<Refer
             values,
             from_hz: vec![a.state.shaft_hz, b.state.shaft_hz],
             how: "interpolated",
+            uncertainty: BTreeMap::new(),
         });
     }
     let nearest = cands.iter().min_by(|a, b| rel(a).total_cmp(&rel(b)))?;
@@ -175,6 +187,7 @@ fn reference(cands: &[&StateRecord], f: f64, any_distance: bool) -> Option<Refer
         values: nearest.values.clone(),
         from_hz: vec![nearest.state.shaft_hz],
         how: "nearest",
+        uncertainty: BTreeMap::new(),
     })
 }
 
@@ -230,6 +243,15 @@ impl StateBaseline {
             .map(|r| score_of(&departures(r, &zeros(r), |k| across.get(k).copied())))
             .collect();
         let across_threshold = threshold(across.len(), &across_scores);
+        let observed: Vec<Observed> = records
+            .iter()
+            .filter(|r| !r.lines.is_empty())
+            .map(|r| Observed {
+                state: &r.state,
+                lines: &r.lines,
+            })
+            .collect();
+        let model = (!observed.is_empty()).then(|| MachineModel::fit(&observed));
         Ok(StateBaseline {
             records,
             within,
@@ -237,6 +259,7 @@ impl StateBaseline {
             within_scores,
             across,
             across_threshold,
+            model,
         })
     }
 
@@ -294,7 +317,9 @@ impl StateBaseline {
                 loads.join(", ")
             ));
         }
-        reference(&cands, state.shaft_hz, false).ok_or_else(|| {
+        reference(&cands, state.shaft_hz, false)
+            .or_else(|| self.model_reference(state))
+            .ok_or_else(|| {
             let speeds: Vec<String> = cands
                 .iter()
                 .map(|r| format!("{:.1}", r.state.shaft_hz))
@@ -308,24 +333,75 @@ impl StateBaseline {
         })
     }
 
+    /// The expected features at `state` predicted by the machine's calibrated model: its
+    /// nearest healthy record at the state's load, each feature the model's lines feed moved
+    /// by the model's change from that record's state to `state` ([`MachineModel::shift`])
+    /// and judged with the model's uncertainty added to its scale between states; the rest as
+    /// that record holds them. `None` without an accepted model or outside its calibrated
+    /// range.
+    pub fn model_reference(&self, state: &OperatingState) -> Option<Reference> {
+        let model = self.model.as_ref()?.as_ref().ok()?;
+        if !model.covers(state) {
+            return None;
+        }
+        let f = state.shaft_hz;
+        let cands = candidates(&self.records, state.load.as_ref());
+        let nearest = cands
+            .iter()
+            .filter(|r| !r.lines.is_empty())
+            .min_by(|a, b| {
+                (a.state.shaft_hz / f)
+                    .ln()
+                    .abs()
+                    .total_cmp(&(b.state.shaft_hz / f).ln().abs())
+            })?;
+        let shift = model.shift(&nearest.state, state);
+        let values = nearest
+            .values
+            .iter()
+            .map(|(k, v)| (k.clone(), v + shift.get(k).map_or(0.0, |s| s.change)))
+            .collect();
+        Some(Reference {
+            values,
+            from_hz: vec![nearest.state.shaft_hz],
+            how: "model",
+            uncertainty: shift.into_iter().map(|(k, s)| (k, s.sigma)).collect(),
+        })
+    }
+
+    /// The machine's calibrated model, or why it was refused (`None`: the records carry no
+    /// line levels).
+    pub fn model(&self) -> Option<&Result<MachineModel, Refused>> {
+        self.model.as_ref()
+    }
+
     /// Judge a record's features at its state; `Err` as [`StateBaseline::reference`].
     pub fn score(
         &self,
         state: &OperatingState,
         values: &BTreeMap<String, f64>,
     ) -> std::result::Result<StateScore, String> {
-        let r = self.reference(state)?;
+        Ok(self.score_against(values, self.reference(state)?))
+    }
+
+    /// Judge a record's features against a given reference (the same-state repeatability for
+    /// a same-state reference, else the spread between states).
+    pub fn score_against(&self, values: &BTreeMap<String, f64>, r: Reference) -> StateScore {
         let same = r.how == "same-state" && !self.within.noise.is_empty();
         let n = r.from_hz.len();
         let (d, threshold) = if same {
             let d = departures(values, &r.values, |k| self.within.scale(k, n));
             (d, self.within_threshold)
         } else {
-            let d = departures(values, &r.values, |k| self.across.get(k).copied());
-            (d, self.across_threshold)
+            let scale = |k: &str| {
+                let a = *self.across.get(k)?;
+                let u = r.uncertainty.get(k).copied().unwrap_or(0.0);
+                Some(a.hypot(u))
+            };
+            (departures(values, &r.values, scale), self.across_threshold)
         };
         let score = score_of(&d);
-        Ok(StateScore {
+        StateScore {
             score,
             threshold,
             anomalous: score > threshold,
@@ -333,7 +409,7 @@ impl StateBaseline {
             reference_hz: r.from_hz,
             top: d.iter().take(TOP_K).cloned().collect(),
             departures: d,
-        })
+        }
     }
 
     /// The threshold of a record at a baseline state.
@@ -434,6 +510,7 @@ mod tests {
             },
             values: BTreeMap::from([("a".to_string(), v), ("b".to_string(), 0.0)]),
             spread: BTreeMap::new(),
+            lines: Vec::new(),
         }
     }
 

@@ -34,7 +34,9 @@ use std::collections::BTreeMap;
 use rustfft::num_complex::Complex64;
 
 use super::lines::{Layout, LineMap};
+use super::machine_model::LineLevel;
 use super::parts::Parts;
+use super::plot::{lines_top, marked_lines};
 use crate::Result;
 use crate::signal::order::{ShaftAngle, angular_resample, samples_per_rev_for};
 use crate::signal::tsa::{OrderAnalysis, ShaftTrain, order_analysis_at};
@@ -53,6 +55,9 @@ pub const EVIDENCE_VERSION: u32 = 2;
 pub struct Evidence {
     pub values: BTreeMap<String, f64>,
     pub spread: BTreeMap<String, f64>,
+    /// The level of each marked line (mesh harmonics, their sidebands, shaft lines): what a
+    /// machine's model is calibrated on ([`super::machine_model`]).
+    pub lines: Vec<LineLevel>,
     /// Why the record's own resolution stood in for the common period, when it did.
     pub note: Option<String>,
 }
@@ -146,7 +151,14 @@ pub fn evidence(
         layout,
         max_order,
     } = Angular::of(x, fs, angle, &map)?;
-    let mut values = angular_features(&samples, p, &layout, &map, parts, max_order)?;
+    let (mut values, spec) = angular_features(&samples, p, &layout, &map, parts, max_order)?;
+    let bpo = layout.revolutions as f64;
+    let top = lines_top(&map, max_order);
+    let amp = &spec.amplitude[..((top * bpo) as usize + 1).min(spec.amplitude.len())];
+    let lines = marked_lines(&map, parts, amp, bpo, top)
+        .iter()
+        .filter_map(LineLevel::of)
+        .collect();
     if let Some(a) = order {
         tsa_features(a, &mut values);
     }
@@ -155,6 +167,7 @@ pub fn evidence(
     Ok(Evidence {
         values,
         spread,
+        lines,
         note: map.resolution_note(&layout),
     })
 }
@@ -249,7 +262,7 @@ fn spread(
     let mut sides = Vec::with_capacity(k);
     for i in 0..k {
         let part = &resampled[i * len..(i + 1) * len];
-        let mut v = angular_features(part, p, &seg, map, parts, max_order)?;
+        let (mut v, _) = angular_features(part, p, &seg, map, parts, max_order)?;
         // The samples of the same revolutions, for the TSA and the statistics.
         let (a, b) = sample_span(angle, i * seg.revolutions, (i + 1) * seg.revolutions);
         if b > a + 1 {
@@ -316,7 +329,7 @@ fn sub_angle(angle: &ShaftAngle, a: usize, b: usize) -> ShaftAngle {
 }
 
 /// The features read from the record in the input shaft's angle: line classes, shaft lines,
-/// the envelope's classes, level and bearing lines.
+/// the envelope's classes, level and bearing lines; and the order spectrum they were read from.
 fn angular_features(
     samples: &[f64],
     p: usize,
@@ -324,7 +337,7 @@ fn angular_features(
     map: &LineMap,
     parts: &Parts,
     max_order: f64,
-) -> Result<BTreeMap<String, f64>> {
+) -> Result<(BTreeMap<String, f64>, Spectrum)> {
     let spec = amplitude_spectrum(samples, p as f64, Window::Hann)?;
     let mut out = BTreeMap::new();
     for (k, e) in map.energies(&spec.amplitude, layout, max_order, true) {
@@ -333,7 +346,7 @@ fn angular_features(
         }
     }
     envelope_features(samples, p, layout, map, parts, max_order, &mut out)?;
-    Ok(out)
+    Ok((out, spec))
 }
 
 /// `tsa.<S>.<metric>` from a per-shaft TSA.

@@ -201,6 +201,16 @@ pub fn findings(score: &StateScore, parts: &Parts, response: Option<&Response>) 
     if !score.anomalous {
         return Vec::new();
     }
+    explained(score, parts, response).1
+}
+
+/// The explanation of a record's change from its reference and its findings, whether the
+/// record is anomalous or not (the closed loop reads both: [`super::measured_loop`]).
+pub fn explained(
+    score: &StateScore,
+    parts: &Parts,
+    response: Option<&Response>,
+) -> (Explanation, Vec<Finding>) {
     let map = LineMap::of(parts);
     let reference = score
         .departures
@@ -228,7 +238,7 @@ pub fn findings(score: &StateScore, parts: &Parts, response: Option<&Response>) 
             .then(b.share.total_cmp(&a.share))
     });
     out.extend(unexplained(&ex, score, &out));
-    out
+    (ex, out)
 }
 
 /// A change of a whole band or of a stage's mesh lines, not of one part.

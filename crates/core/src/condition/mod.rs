@@ -20,6 +20,8 @@ pub mod evidence;
 pub mod explain;
 pub mod findings;
 pub mod lines;
+pub mod machine_model;
+pub mod measured_loop;
 pub mod parts;
 pub mod plot;
 pub mod setup;

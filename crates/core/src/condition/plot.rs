@@ -122,17 +122,9 @@ pub fn evidence_plot(
     let a = Angular::of(x, fs, angle, &map)?;
     let spec = amplitude_spectrum(&a.samples, a.p as f64, Window::Hann)?;
     let bpo = a.layout.revolutions as f64;
-    let meshes_top = map
-        .regions
-        .iter()
-        .rev()
-        .find(|r| r.centre.is_some())
-        .map_or(map.top_order(), |r| r.hi);
-    let top = meshes_top.min(a.max_order);
+    let top = lines_top(&map, a.max_order);
     let amp = &spec.amplitude[..((top * bpo) as usize + 1).min(spec.amplitude.len())];
-    let at = |o: f64| level_at(amp, o * bpo, 1.0);
-    let mut lines = mesh_lines(&map, parts, top, &at);
-    lines.extend(shaft_lines(&map, top, &at));
+    let lines = marked_lines(&map, parts, amp, bpo, top);
     let envelope = envelope_plot(&a, &map, parts)?;
     Ok(EvidencePlot {
         channel: channel.to_string(),
@@ -160,6 +152,33 @@ pub fn evidence_plot(
         lines,
         envelope,
     })
+}
+
+/// The highest order of the marked lines: the end of the last mesh region, or of the record's
+/// usable orders.
+pub(super) fn lines_top(map: &LineMap, max_order: f64) -> f64 {
+    let meshes_top = map
+        .regions
+        .iter()
+        .rev()
+        .find(|r| r.centre.is_some())
+        .map_or(map.top_order(), |r| r.hi);
+    meshes_top.min(max_order)
+}
+
+/// The mesh harmonics, their sidebands and the shafts' 1×/2× below order `top`, each read
+/// from the order spectrum `amp` (`bpo` bins to an order).
+pub(super) fn marked_lines(
+    map: &LineMap,
+    parts: &Parts,
+    amp: &[f64],
+    bpo: f64,
+    top: f64,
+) -> Vec<Line> {
+    let at = |o: f64| level_at(amp, o * bpo, 1.0);
+    let mut lines = mesh_lines(map, parts, top, &at);
+    lines.extend(shaft_lines(map, top, &at));
+    lines
 }
 
 /// `20 log10(a)` rounded to 0.1 dB, floored at [`FLOOR_DB`].
