@@ -124,6 +124,12 @@ pub struct DiagnoseArgs {
     /// load, and its `findings` name the part it points at.
     #[arg(long, value_name = "F.csv")]
     pub baseline_manifest: Option<PathBuf>,
+    /// Write the machine's model calibrated on the baseline's records here (JSON, one member
+    /// per channel: its report — each state's fit, the leave-one-speed-out error against a
+    /// smooth curve's, the uncertainty, the transfer path — or why it was refused), as
+    /// `GET /v1/machines/{id}/baseline` shows it under `channels.*.model`.
+    #[arg(long, value_name = "FILE")]
+    pub model_report: Option<PathBuf>,
     /// File format (default: from the extension).
     #[arg(long, value_enum)]
     pub format: Option<FormatArg>,
@@ -324,6 +330,9 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
             &|f, rec| facts_of(rec, f.shaft_hz.or(a.shaft_hz), f.load.clone(), true),
         )?
     };
+    if let Some(path) = &a.model_report {
+        write_model_report(path, &fitted)?;
+    }
     machine.baselines = &fitted.pooled;
     machine.state_baselines = &fitted.states;
     machine.baseline_counts = &fitted.counts;
@@ -347,6 +356,23 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
     .map_err(with_flag_hint)?;
     println!("{}", serde_json::to_string_pretty(&assessment)?);
     Ok(())
+}
+
+/// The machine's calibrated model of every state-aware channel, as JSON at `path`.
+fn write_model_report(path: &std::path::Path, fitted: &Baselines) -> Result<()> {
+    if fitted.states.is_empty() {
+        bail!(
+            "--model-report needs a state-aware baseline: give --baseline-manifest with healthy \
+             records at three speeds or more, and --gearbox"
+        );
+    }
+    let report: serde_json::Map<String, serde_json::Value> = fitted
+        .states
+        .iter()
+        .map(|(ch, b)| (ch.clone(), crate::views::machine_model_json(b)))
+        .collect();
+    std::fs::write(path, serde_json::to_string_pretty(&report)?)
+        .with_context(|| format!("writing the model report {}", path.display()))
 }
 
 /// The `gearbox` object of the answer: the description file's stem, the built-in rig's id, or

@@ -17,7 +17,7 @@ use crate::assessment::{assert_same_assessment, tmpdir};
 use crate::both_stores;
 use crate::helpers::*;
 use crate::mqtt::{Broker, client, mqtt_settings, wait_connected};
-use crate::operating_state::{FS, HELICAL, PPR, channels, record, wait_ready};
+use crate::operating_state::{FS, HELICAL, PPR, channels, get, record, wait_ready};
 
 both_stores!(http_mqtt_and_the_cli_assess_a_record_alike);
 
@@ -146,8 +146,25 @@ async fn http_mqtt_and_the_cli_assess_a_record_alike(b: Backend) {
         "low",
         "--baseline-manifest",
         dir.join("manifest.csv").to_str().unwrap(),
+        "--model-report",
+        dir.join("model.json").to_str().unwrap(),
     ]))
     .unwrap();
+
+    // The machine's calibrated model: the CLI's report and the service's baseline agree.
+    let baseline = get(
+        &app,
+        "/v1/machines/gb/baseline",
+        "/v1/machines/{machine_id}/baseline",
+    )
+    .await;
+    let cli_model: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("model.json")).unwrap()).unwrap();
+    for ch in ["a1", "a2"] {
+        let served = &baseline["channels"][ch]["model"];
+        assert!(served["status"].is_string(), "{served}");
+        assert_eq!(&cli_model[ch], served, "channel {ch}");
+    }
 
     // Not a vacuous comparison: state-aware, with findings and an alert.
     assert_eq!(http["baseline"]["records"], 12, "{http}");

@@ -130,7 +130,7 @@ async fn put(app: &TestApp, path: &str, template: &str, body: Value) -> (u16, Va
     (s, json(&b))
 }
 
-async fn get(app: &TestApp, path: &str, template: &str) -> Value {
+pub(crate) async fn get(app: &TestApp, path: &str, template: &str) -> Value {
     let (s, _, b) = checked(
         app.client.get(app.url(path)).bearer_auth(&app.read_key),
         "GET",
@@ -285,6 +285,22 @@ async fn a_tachometer_machine_is_judged_at_its_operating_state(b: Backend) {
                 assert!(near(g, want), "coverage speed {g}, want {want} Hz: {l}");
             }
             assert!(near(&l["min_hz"], 30.0) && near(&l["max_hz"], 40.0), "{l}");
+        }
+        // The machine's model, calibrated on the records' line levels at three speeds (or
+        // refused, saying against what): never missing for records that carry them.
+        let model = &c["model"];
+        match model["status"].as_str() {
+            Some("calibrated") => {
+                let r = &model["report"];
+                assert_eq!(r["records"], 12, "{r}");
+                assert!(r["lines"].as_u64().unwrap() > 0, "{r}");
+                assert_eq!(r["speeds_hz"].as_array().unwrap().len(), 3, "{r}");
+            }
+            Some("refused") => {
+                let why = model["reason"].as_str().unwrap();
+                assert!(why.contains("smooth curve"), "{why}");
+            }
+            _ => panic!("{model}"),
         }
     }
     assert!(bl["channels"].get("tacho").is_none(), "{bl}");

@@ -81,7 +81,7 @@ pub struct Reference {
     /// `same-state`, `interpolated`, `nearest` or `model`.
     pub how: &'static str,
     /// The model's prediction uncertainty of the features it moved (ln units; `model` only):
-    /// added in quadrature to their scale.
+    /// their scale is this and the state's repeatability in quadrature.
     pub uncertainty: BTreeMap<String, f64>,
 }
 
@@ -336,8 +336,8 @@ impl StateBaseline {
     /// The expected features at `state` predicted by the machine's calibrated model: its
     /// nearest healthy record at the state's load, each feature the model's lines feed moved
     /// by the model's change from that record's state to `state` ([`MachineModel::shift`])
-    /// and judged with the model's uncertainty added to its scale between states; the rest as
-    /// that record holds them. `None` without an accepted model or outside its calibrated
+    /// and judged with the model's uncertainty and the state's repeatability; the rest as
+    /// that record holds them, judged with the spread between states. `None` without an accepted model or outside its calibrated
     /// range.
     pub fn model_reference(&self, state: &OperatingState) -> Option<Reference> {
         let model = self.model.as_ref()?.as_ref().ok()?;
@@ -393,10 +393,11 @@ impl StateBaseline {
             let d = departures(values, &r.values, |k| self.within.scale(k, n));
             (d, self.within_threshold)
         } else {
-            let scale = |k: &str| {
-                let a = *self.across.get(k)?;
-                let u = r.uncertainty.get(k).copied().unwrap_or(0.0);
-                Some(a.hypot(u))
+            // A feature the model moved: the nearest record's repeatability and the model's
+            // uncertainty; the rest: the spread between states.
+            let scale = |k: &str| match (r.uncertainty.get(k), self.within.scale(k, 1)) {
+                (Some(u), Some(w)) => Some(w.hypot(*u)),
+                _ => self.across.get(k).copied(),
             };
             (departures(values, &r.values, scale), self.across_threshold)
         };
@@ -558,6 +559,52 @@ mod tests {
         assert!(e.contains("near 60.00 Hz") && e.contains("load Low"), "{e}");
         let e = b.score(&st(40.0, "Medium"), &BTreeMap::new()).unwrap_err();
         assert!(e.contains("load Medium") && e.contains("High"), "{e}");
+    }
+
+    /// Features from the test lines (`ln` of each feature's RMS amplitude) and the lines.
+    fn with_lines(f: f64, run: usize, shift: f64) -> StateRecord {
+        let lines = crate::condition::test_util::lines(f, "High", run, 0.3, true);
+        let mut energy: BTreeMap<String, (f64, f64)> = BTreeMap::new();
+        for l in &lines {
+            let e = energy.entry(l.feature.clone()).or_default();
+            e.0 += 10f64.powf(l.level_db / 10.0);
+            e.1 += 1.0;
+        }
+        let values: BTreeMap<String, f64> = energy
+            .into_iter()
+            .enumerate()
+            .map(|(i, (k, (e, n)))| (k, 0.5 * (e / n).ln() + if i < 3 { shift } else { 0.0 }))
+            .collect();
+        StateRecord {
+            spread: values.keys().map(|k| (k.clone(), 0.05)).collect(),
+            values,
+            lines,
+            ..rec(f, "High", 0.0)
+        }
+    }
+
+    /// Records at 20, 22 and 36 Hz leave 30 Hz uncovered (no record within 8 %, the gap
+    /// 22–36 Hz too wide to interpolate) but inside the calibrated range: a healthy record
+    /// there is judged against the model's reference, a changed one is anomalous, and 40 Hz
+    /// (outside the range) is still refused.
+    #[test]
+    fn an_uncovered_state_inside_the_range_is_judged_against_the_model() {
+        let recs: Vec<StateRecord> = [(20.0, 1), (22.0, 2), (36.0, 3), (20.0, 4), (36.0, 5)]
+            .into_iter()
+            .map(|(f, i)| with_lines(f, i, 0.0))
+            .collect();
+        let b = StateBaseline::fit(recs).unwrap();
+        assert!(matches!(b.model(), Some(Ok(_))), "{:?}", b.model());
+        let healthy = with_lines(30.0, 9, 0.0);
+        let ok = b.score(&healthy.state, &healthy.values).unwrap();
+        assert_eq!(ok.reference, "model");
+        assert_eq!(ok.reference_hz, vec![36.0]);
+        assert!(!ok.anomalous, "{ok:?}");
+        let changed = with_lines(30.0, 9, 3.5);
+        let bad = b.score(&changed.state, &changed.values).unwrap();
+        assert!(bad.anomalous, "{bad:?}");
+        let e = b.score(&rec(40.0, "High", 0.0).state, &BTreeMap::new());
+        assert!(e.unwrap_err().contains("near 40.00 Hz"));
     }
 
     /// Two records per state, a feature that bends with speed (not linear in ln f): a healthy
