@@ -307,12 +307,18 @@ pub fn run(t: &Train) {
         .map(|&x| (x, leave_out(x, &base, &recs, &parts)))
         .collect();
     let mut totals: [[Errors; 3]; 2] = Default::default();
+    let mut inside: [[Errors; 3]; 2] = Default::default();
+    let ends = (speeds.first().copied(), speeds.last().copied());
     let mut by_load: BTreeMap<&str, [Errors; 2]> = BTreeMap::new();
     for (x, l) in &left {
+        let inner = Some(*x) != ends.0 && Some(*x) != ends.1;
         for (run, e) in l.errs.iter().enumerate() {
             print_errors(&format!("{x} Hz, run {}", run + 1), e, run == 1);
             for (k, v) in e.iter().enumerate() {
                 totals[run][k].extend(v);
+                if inner {
+                    inside[run][k].extend(v);
+                }
             }
         }
         for (load, e) in &l.by_load {
@@ -323,6 +329,10 @@ pub fn run(t: &Train) {
     }
     for (run, e) in totals.iter().enumerate() {
         print_errors(&format!("all, run {}", run + 1), e, run == 1);
+    }
+    for (run, e) in inside.iter().enumerate() {
+        let label = format!("inside the range (not the end speeds), run {}", run + 1);
+        print_errors(&label, e, run == 1);
     }
     for (load, e) in &by_load {
         println!("| all, run 1, load {load} | model | {} |", e[0].cells());
