@@ -48,6 +48,18 @@ fn median(mut v: Vec<f64>) -> Option<f64> {
     (!v.is_empty()).then(|| gearwear::signal::median(&mut v))
 }
 
+/// Channel `ch`'s line levels of records with a measured state.
+fn observed<'a>(recs: &[&'a Rec], ch: usize) -> Vec<Observed<'a>> {
+    recs.iter()
+        .filter_map(|r| {
+            Some(Observed {
+                state: r.state(ch)?,
+                lines: &r.features[ch].lines,
+            })
+        })
+        .collect()
+}
+
 fn state_record(f: &RecordFeatures) -> Option<StateRecord> {
     Some(StateRecord {
         state: f.state.clone()?,
@@ -276,17 +288,9 @@ pub fn run(t: &Train) {
         "## The machine's calibrated model, PHM 2009 {} train\n",
         t.name
     );
+    print_stored_size(&base);
     for (ch, name) in CHANNELS.iter().enumerate() {
-        let obs: Vec<Observed> = base
-            .iter()
-            .filter_map(|r| {
-                Some(Observed {
-                    state: r.state(ch)?,
-                    lines: &r.features[ch].lines,
-                })
-            })
-            .collect();
-        match MachineModel::fit(&obs) {
+        match MachineModel::fit(&observed(&base, ch)) {
             Ok(m) => print_report(name, &m),
             Err(e) => println!("channel `{name}`: refused: {e}\n"),
         }
@@ -371,16 +375,7 @@ fn leave_out<'a>(x: u32, base: &[&Rec], recs: &'a [Rec<'a>], parts: &Parts) -> L
     let mut out = LeftOut::default();
     let mut bases = Vec::new();
     for (ch, name) in CHANNELS.iter().enumerate() {
-        let obs: Vec<Observed> = train
-            .iter()
-            .filter_map(|r| {
-                Some(Observed {
-                    state: r.state(ch)?,
-                    lines: &r.features[ch].lines,
-                })
-            })
-            .collect();
-        let model = match MachineModel::fit(&obs) {
+        let model = match MachineModel::fit(&observed(&train, ch)) {
             Ok(m) => m,
             Err(e) => {
                 println!("| {x} Hz | channel {name} refused: {e} | | | | |");
@@ -421,6 +416,28 @@ fn leave_out<'a>(x: u32, base: &[&Rec], recs: &'a [Rec<'a>], parts: &Parts) -> L
         out.judged = Some((tally(&bases, &judged, true), tally(&bases, &judged, false)));
     }
     out
+}
+
+/// What the line levels add to the features stored with each record.
+fn print_stored_size(base: &[&Rec]) {
+    let size = |f: &RecordFeatures| serde_json::to_string(f).map_or(0, |j| j.len());
+    let n = base.len().max(1);
+    let with: usize = base.iter().flat_map(|r| &r.features).map(size).sum();
+    let without: usize = base
+        .iter()
+        .flat_map(|r| &r.features)
+        .map(|f| {
+            size(&RecordFeatures {
+                lines: Vec::new(),
+                ..f.clone()
+            })
+        })
+        .sum();
+    println!(
+        "Stored features per record (JSON, both channels): {} B, of which the line levels {} B\n",
+        with / n,
+        (with - without) / n
+    );
 }
 
 fn print_errors(label: &str, e: &[Errors; 3], floor: bool) {

@@ -35,8 +35,8 @@ use rustfft::num_complex::Complex64;
 
 use super::lines::{Layout, LineMap};
 use super::machine_model::LineLevel;
+use super::marked::{lines_top, marked_lines};
 use super::parts::Parts;
-use super::plot::{lines_top, marked_lines};
 use crate::Result;
 use crate::signal::order::{ShaftAngle, angular_resample, samples_per_rev_for};
 use crate::signal::tsa::{OrderAnalysis, ShaftTrain, order_analysis_at};

@@ -44,7 +44,7 @@ use std::collections::BTreeMap;
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
-use super::plot::Line;
+use super::marked::Line;
 use super::state::{Load, OperatingState};
 
 /// Knots of the path per decade of frequency.
@@ -281,16 +281,7 @@ struct Obs {
 }
 
 fn median(mut v: Vec<f64>) -> Option<f64> {
-    if v.is_empty() {
-        return None;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    Some(if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    })
+    (!v.is_empty()).then(|| crate::signal::median(&mut v))
 }
 
 fn same_load(a: &Option<Load>, b: &Option<Load>) -> bool {

@@ -21,6 +21,7 @@ pub mod explain;
 pub mod findings;
 pub mod lines;
 pub mod machine_model;
+pub(crate) mod marked;
 pub mod measured_loop;
 pub mod parts;
 pub mod plot;
