@@ -83,6 +83,14 @@ pub enum Error {
          load): it needs longer healthy records"
     )]
     BaselineUnrepeatable,
+    /// A transfer-path calibration that predicts a left-out speed of the healthy records no
+    /// better than the plain model does (dB, RMS of the line-ratio residuals).
+    #[error(
+        "the transfer path calibrated on the healthy records predicts a left-out speed no better \
+         than the plain model ({path_db:.2} dB against {plain_db:.2} dB RMS): it is not used; \
+         check the healthy records' speeds"
+    )]
+    PathNoBetter { path_db: f64, plain_db: f64 },
     /// Stored data (an effect, a gearbox, a report) that cannot be read or written back.
     #[error("stored {what} cannot be read or written: {reason}")]
     Stored { what: String, reason: String },

@@ -24,6 +24,7 @@
 //!    mean curve at the measured Ω1; reported for comparison.
 
 mod inputs;
+pub mod machine_path;
 mod matcher;
 mod options;
 mod report;
