@@ -91,11 +91,11 @@ fn score(rows: &[(Truth, Reading)]) -> String {
     )
 }
 
+/// The figure as the product gives it: none where the model does not fit.
 fn wear(d: &gearwear::Result<Diagnosis>) -> Reading {
-    let w = &d.as_ref().ok()?.wear_degree;
-    w.withheld
-        .is_none()
-        .then_some((w.estimate, w.lower, w.upper))
+    let d = d.as_ref().ok()?;
+    let w = &d.wear_degree;
+    (w.withheld.is_none() && !d.fit.inflated).then_some((w.estimate, w.lower, w.upper))
 }
 
 fn main() {

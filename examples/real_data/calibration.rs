@@ -24,18 +24,23 @@ use gearwear::condition::Parts;
 use gearwear::condition::baseline::{StateBaseline, StateRecord};
 use gearwear::condition::machine_model::{LineKind, LineLevel, MachineModel, Observed};
 use gearwear::condition::measured_loop::{MeasuredLoop, close_loop};
+use gearwear::diagnosis::machine_path::PathCalibration;
+use gearwear::diagnosis::{DiagnoseOptions, Diagnosis, diagnose};
 use gearwear::gearbox::Gearbox;
 use gearwear::novelty::RecordFeatures;
+use gearwear::record::Record;
+use gearwear::signature::SignatureTable;
 use rayon::prelude::*;
 
 use super::phm::{self, CHOSEN, File, Train};
 
 const CHANNELS: [&str; 2] = ["input", "output"];
 
-/// One record's two channels' features.
+/// One record's two channels' features and plain diagnoses (at the measured speed).
 struct Rec<'a> {
     file: &'a File,
     features: Vec<RecordFeatures>,
+    diagnoses: Vec<Option<Diagnosis>>,
 }
 
 impl Rec<'_> {
@@ -203,14 +208,40 @@ fn flagged(bases: &[StateBaseline], r: &Rec, model: bool) -> Option<bool> {
     any
 }
 
-fn features(t: &Train, gb: &Gearbox, all: &[File]) -> Vec<Vec<RecordFeatures>> {
+/// Each record's features and, with the train's table, each channel's plain diagnosis at
+/// its measured speed.
+type Computed = (Vec<RecordFeatures>, Vec<Option<Diagnosis>>);
+
+fn features(
+    t: &Train,
+    gb: &Gearbox,
+    all: &[File],
+    table: Option<&SignatureTable>,
+) -> Vec<Computed> {
     let empty = Default::default();
     let m = phm::machine(t, gb, None, &empty);
     all.par_iter()
         .map(|f| {
             let healthy = f.case == 1;
             let (mut ch, facts) = phm::load(f, true, healthy);
-            baseline_features(&mut ch, &CHOSEN, &facts, &m).expect("features")
+            let feats = baseline_features(&mut ch, &CHOSEN, &facts, &m).expect("features");
+            let diags = CHOSEN
+                .iter()
+                .zip(&feats)
+                .map(|(&i, fe)| {
+                    let table = table?;
+                    let opts = DiagnoseOptions {
+                        shaft_hz: Some(fe.state.as_ref()?.shaft_hz),
+                        ..Default::default()
+                    };
+                    let rec = Record {
+                        samples: ch[i].1.clone(),
+                        sample_rate: facts.sample_rate_hz,
+                    };
+                    diagnose(&rec, table, &opts).ok()
+                })
+                .collect();
+            (feats, diags)
         })
         .collect()
 }
@@ -253,11 +284,16 @@ pub fn run(t: &Train) {
         return;
     }
     let gb = Gearbox::from_file(&phm::manifest(t.config)).expect("description");
-    let feats = features(t, &gb, &all);
+    let table = SignatureTable::load(&phm::manifest(t.table)).ok();
+    let feats = features(t, &gb, &all, table.as_ref());
     let recs: Vec<Rec> = all
         .iter()
         .zip(feats)
-        .map(|(file, features)| Rec { file, features })
+        .map(|(file, (features, diagnoses))| Rec {
+            file,
+            features,
+            diagnoses,
+        })
         .collect();
     let base: Vec<&Rec> = recs
         .iter()
@@ -352,6 +388,73 @@ pub fn run(t: &Train) {
         .collect();
     print_loops(t, &loops);
     print_judged(&left);
+    if let Some(table) = &table {
+        print_wear(&recs, &base, table);
+    }
+}
+
+/// Wear through each channel's transfer path calibrated on the baseline's plain diagnoses:
+/// how many records get a figure, and what it reads, healthy (case 1 run 2) and not.
+fn print_wear(recs: &[Rec], base: &[&Rec], table: &SignatureTable) {
+    let opts = DiagnoseOptions::default();
+    println!("### Wear through the calibrated transfer path (table's line ratios)\n");
+    println!(
+        "| channel | calibration | records | plain: a figure | calibrated: a figure | calibrated ea, healthy run 2 (median) | calibrated ea, faulted (median) |\n| --- | --- | --- | --- | --- | --- | --- |"
+    );
+    for (ch, name) in CHANNELS.iter().enumerate() {
+        let healthy: Vec<Diagnosis> = base
+            .iter()
+            .filter_map(|r| r.diagnoses[ch].clone())
+            .collect();
+        let cal = match PathCalibration::fit(table, &opts, &healthy) {
+            Ok(c) => c,
+            Err(e) => {
+                println!("| {name} | refused: {e} | | | | | |");
+                continue;
+            }
+        };
+        let judged: Vec<&Rec> = recs
+            .iter()
+            .filter(|r| !(r.file.case == 1 && r.file.run == 1))
+            .collect();
+        let mut plain_n = 0;
+        let mut given: Vec<(bool, f64)> = Vec::new();
+        for r in &judged {
+            let Some(d) = &r.diagnoses[ch] else { continue };
+            // As the product does: no figure where the model does not fit.
+            plain_n += !d.fit.inflated as usize;
+            let shaft = d.shaft_hz;
+            let o = DiagnoseOptions {
+                shaft_hz: Some(shaft),
+                ..Default::default()
+            };
+            let rec = phm::load(r.file, true, false).0;
+            let x = Record {
+                samples: rec[ch].1.clone(),
+                sample_rate: phm::FS,
+            };
+            if let Ok(c) = cal.diagnose(&x, table, &o)
+                && c.wear_degree.withheld.is_none()
+            {
+                given.push((r.file.case == 1, c.wear_degree.estimate));
+            }
+        }
+        let med = |h: bool| {
+            median(given.iter().filter(|g| g.0 == h).map(|g| g.1).collect())
+                .map_or("–".into(), |v| format!("{v:.3}"))
+        };
+        println!(
+            "| {name} | left-out residual {:.2} dB (plain {:.2} dB), λ {} | {} | {plain_n} | {} | {} | {} |",
+            cal.residual_after_db,
+            cal.residual_before_db,
+            cal.lambda,
+            judged.len(),
+            given.len(),
+            med(true),
+            med(false)
+        );
+    }
+    println!();
 }
 
 /// What leaving one speed out gives.

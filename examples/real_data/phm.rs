@@ -25,7 +25,7 @@ use gearwear::record::{ReadOptions, read_record_channels};
 use gearwear::signature::SignatureTable;
 use rayon::prelude::*;
 
-const FS: f64 = 200_000.0 / 3.0;
+pub const FS: f64 = 200_000.0 / 3.0;
 const SPEEDS: [u32; 5] = [30, 35, 40, 45, 50];
 const LOADS: [&str; 2] = ["High", "Low"];
 
@@ -36,7 +36,7 @@ pub struct Train {
     pub dir_env: &'static str,
     pub default_dir: &'static str,
     pub config: &'static str,
-    table: &'static str,
+    pub table: &'static str,
     cases: u32,
     /// Shafts carrying a damaged gear, per case (empty: no gear damage).
     pub gear_shafts: fn(u32) -> &'static [&'static str],

@@ -361,7 +361,18 @@ impl PathCalibration {
             shaft_hz: Some(plain.shaft_hz),
             ..opts.clone()
         };
-        diagnose_shifted(record, table, &held, &shift, &var)
+        let mut d = diagnose_shifted(record, table, &held, &shift, &var)?;
+        if d.fit.inflated {
+            let why = format!(
+                "no wear figure: the model seen through the machine's calibrated path does not \
+                 fit this record (χ² per feature {:.1} over {} features): a change the wear \
+                 model does not make (local damage, a bearing, another path)",
+                d.fit.chi2_per_feature, d.fit.features
+            );
+            d.wear_degree.withheld = Some(why.clone());
+            d.wear_note = Some(why);
+        }
+        Ok(d)
     }
 
     /// The path (Hz, dB relative to its own level) at its knots.
