@@ -326,7 +326,13 @@ pub fn run(t: &Train) {
     );
     print_stored_size(&base);
     for (ch, name) in CHANNELS.iter().enumerate() {
-        match MachineModel::fit(&observed(&base, ch)) {
+        let t0 = std::time::Instant::now();
+        let fitted = MachineModel::fit(&observed(&base, ch));
+        println!(
+            "channel `{name}`: calibrated in {:.0} ms",
+            1e3 * t0.elapsed().as_secs_f64()
+        );
+        match fitted {
             Ok(m) => print_report(name, &m),
             Err(e) => println!("channel `{name}`: refused: {e}\n"),
         }
