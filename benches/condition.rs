@@ -84,6 +84,7 @@ fn main() {
     let empty_p = BTreeMap::new();
     let empty_s = BTreeMap::new();
     let empty_c = BTreeMap::new();
+    let empty_paths = BTreeMap::new();
     let machine = Machine {
         gearbox: &gb,
         gearbox_ref: GearboxRef {
@@ -101,6 +102,7 @@ fn main() {
         state_baselines: &empty_s,
         baseline_counts: &empty_c,
         calibration: None,
+        paths: &empty_paths,
         thresholds: Thresholds::default(),
         units: Default::default(),
     };
@@ -116,7 +118,10 @@ fn main() {
             }
         }
     }
-    let fitted = Baselines::fit(&by_channel).require_all().unwrap();
+    let fitted = Baselines::fit(&by_channel)
+        .require_all()
+        .unwrap()
+        .with_paths(&by_channel, Some(&diagnoser));
     eprintln!(
         "baseline: 10 records' features and fit in {:.2} s (once)",
         t0.elapsed().as_secs_f64()
@@ -125,6 +130,7 @@ fn main() {
         baselines: &fitted.pooled,
         state_baselines: &fitted.states,
         baseline_counts: &fitted.counts,
+        paths: &fitted.paths,
         ..machine
     };
     // The 4 s record: run 1 then run 2 of the healthy 40 Hz high-load state.

@@ -22,7 +22,7 @@
 
 use gearwear::closed_loop::effects::reference_gears;
 use gearwear::closed_loop::virtual_rig::{RigEffects, RigSpec, generate};
-use gearwear::diagnosis::machine_path::PathCalibration;
+use gearwear::diagnosis::machine_path::{LineRatios, PathCalibration};
 use gearwear::diagnosis::{DiagnoseOptions, Diagnosis, diagnose};
 use gearwear::signature::SignatureTable;
 use gearwear::signature::SplitMix64;
@@ -157,7 +157,8 @@ fn main() {
             diagnose(&r, &table, &opts_for(t)).expect("healthy diagnosis")
         })
         .collect();
-    let cal = match PathCalibration::fit(&table, &opts, &base) {
+    let ratios: Vec<LineRatios> = base.iter().map(LineRatios::of).collect();
+    let cal = match PathCalibration::fit(&table, &opts, &ratios) {
         Ok(c) => c,
         Err(e) => {
             println!("calibration refused: {e}");

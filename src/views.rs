@@ -20,6 +20,27 @@ pub fn machine_model_json(b: &StateBaseline) -> Value {
     }
 }
 
+/// A channel's transfer path calibrated on its healthy records' line ratios
+/// ([`crate::diagnosis::machine_path`]): `calibrated` with the figures, `refused` with the
+/// reason, `null` when its records carry too few line ratios or the table is not ready.
+pub fn path_json(b: &crate::assessment::Baselines, channel: &str) -> Value {
+    if let Some(p) = b.paths.get(channel) {
+        return json!({
+            "status": "calibrated",
+            "records": p.records,
+            "f1_hz": p.f1_hz,
+            "lambda": p.lambda,
+            "residual_db": p.residual_after_db,
+            "plain_residual_db": p.residual_before_db,
+            "path": p.path(),
+        });
+    }
+    match b.path_refusals.get(channel) {
+        Some(why) => json!({"status": "refused", "reason": why}),
+        None => Value::Null,
+    }
+}
+
 /// An episode (without its audit trail).
 pub fn alert_json(a: &AlertRow) -> Value {
     json!({

@@ -24,7 +24,7 @@ use gearwear::condition::Parts;
 use gearwear::condition::baseline::{StateBaseline, StateRecord};
 use gearwear::condition::machine_model::{LineKind, LineLevel, MachineModel, Observed};
 use gearwear::condition::measured_loop::{MeasuredLoop, close_loop};
-use gearwear::diagnosis::machine_path::PathCalibration;
+use gearwear::diagnosis::machine_path::{LineRatios, PathCalibration};
 use gearwear::diagnosis::{DiagnoseOptions, Diagnosis, diagnose};
 use gearwear::gearbox::Gearbox;
 use gearwear::novelty::RecordFeatures;
@@ -408,9 +408,9 @@ fn print_wear(recs: &[Rec], base: &[&Rec], table: &SignatureTable) {
         "| channel | calibration | records | plain: a figure | calibrated: a figure | calibrated ea, healthy run 2 (median) | calibrated ea, faulted (median) |\n| --- | --- | --- | --- | --- | --- | --- |"
     );
     for (ch, name) in CHANNELS.iter().enumerate() {
-        let healthy: Vec<Diagnosis> = base
+        let healthy: Vec<LineRatios> = base
             .iter()
-            .filter_map(|r| r.diagnoses[ch].clone())
+            .filter_map(|r| r.diagnoses[ch].as_ref().map(LineRatios::of))
             .collect();
         let cal = match PathCalibration::fit(table, &opts, &healthy) {
             Ok(c) => c,

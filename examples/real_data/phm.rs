@@ -182,6 +182,7 @@ pub fn machine<'a>(
         state_baselines: &baselines.states,
         baseline_counts: &baselines.counts,
         calibration: None,
+        paths: &baselines.paths,
         thresholds: Thresholds::default(),
         units: Default::default(),
     }

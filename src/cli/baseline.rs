@@ -120,11 +120,12 @@ pub fn fit(
             by_channel.entry(n).or_default().push(ft);
         }
     }
-    Baselines::fit(&by_channel).require_all().with_context(|| {
+    let fitted = Baselines::fit(&by_channel).require_all().with_context(|| {
         format!(
             "{} baseline record(s) given; give at least {} healthy records of the machine",
             files.len(),
             crate::novelty::MIN_BASELINE_RECORDS
         )
-    })
+    })?;
+    Ok(fitted.with_paths(&by_channel, machine.diagnoser))
 }

@@ -300,6 +300,7 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
     let no_baseline = BTreeMap::new();
     let no_states = BTreeMap::new();
     let no_counts = BTreeMap::new();
+    let no_paths = BTreeMap::new();
     let mut machine = Machine {
         gearbox,
         gearbox_ref: gearbox_ref(&a, gearbox, diagnoser.is_some()),
@@ -312,6 +313,7 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
         state_baselines: &no_states,
         baseline_counts: &no_counts,
         calibration: calibration.as_ref(),
+        paths: &no_paths,
         thresholds: Thresholds {
             warning: a.warning_ea,
             alarm: a.alarm_ea,
@@ -335,6 +337,7 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
     }
     machine.baselines = &fitted.pooled;
     machine.state_baselines = &fitted.states;
+    machine.paths = &fitted.paths;
     machine.baseline_counts = &fitted.counts;
     let mut rec = load_record(&a.input, &a, &opts)?;
     let names: Vec<String> = rec

@@ -38,7 +38,7 @@ use crate::novelty::{MIN_BASELINE_RECORDS, RecordFeatures};
 use crate::signature::TableStatus;
 use crate::store::{GearboxRow, MachineConfig, MachineRow, now_ms};
 use crate::time::rfc3339;
-use crate::views::machine_model_json;
+use crate::views::{machine_model_json, path_json};
 
 /// Largest configuration or baseline request body.
 const SMALL_BODY: usize = 64 * 1024;
@@ -158,6 +158,8 @@ struct BaselineKey {
     created_at: i64,
     hash: String,
     version: i64,
+    /// The table the transfer paths were calibrated through (`None`: not ready, no paths).
+    table: Option<String>,
 }
 
 impl BaselineCache {
@@ -216,6 +218,7 @@ pub async fn baselines(
     app: &AppState,
     machine: Option<&MachineRow>,
     hash: &str,
+    diagnoser: Option<Arc<TableDiagnoser>>,
 ) -> ApiResult<Arc<Baselines>> {
     let Some(m) = machine else {
         return Ok(Arc::new(Baselines::default()));
@@ -224,14 +227,17 @@ pub async fn baselines(
         created_at: m.created_at,
         hash: hash.to_string(),
         version: m.baseline_version,
+        table: diagnoser.as_ref().map(|d| d.table_id()),
     };
     if let Some(b) = app.baselines.get(&m.id, &key) {
         return Ok(b);
     }
     let per = baseline_features(app, &m.id, hash).await?;
-    let fitted = tokio::task::spawn_blocking(move || Baselines::fit(&per))
-        .await
-        .map_err(|e| ApiError::internal(format!("fitting the baseline failed: {e}")))?;
+    let fitted = tokio::task::spawn_blocking(move || {
+        Baselines::fit(&per).with_paths(&per, diagnoser.as_deref())
+    })
+    .await
+    .map_err(|e| ApiError::internal(format!("fitting the baseline failed: {e}")))?;
     for (channel, e) in &fitted.unfitted {
         tracing::warn!(machine = %m.id, channel = %channel, error = %e, "a baseline could not be fitted");
     }
@@ -429,12 +435,16 @@ pub async fn put(
 /// baseline is fitted.
 pub async fn baseline_json(app: &AppState, m: &MachineRow) -> ApiResult<Value> {
     let rows = app.store.baseline_records(&m.id).await?;
-    let ctx_hash = match &m.gearbox_id {
-        Some(g) => app.store.get_gearbox(g).await?.map(|r| r.hash),
-        None => app.store.get_gearbox(BUILTIN_ID).await?.map(|r| r.hash),
+    let row = match &m.gearbox_id {
+        Some(g) => app.store.get_gearbox(g).await?,
+        None => app.store.get_gearbox(BUILTIN_ID).await?,
     };
-    let b = match &ctx_hash {
-        Some(h) => baselines(app, Some(m), h).await?,
+    let ctx_hash = row.as_ref().map(|r| r.hash.clone());
+    let b = match &row {
+        Some(r) => {
+            let diagnoser = app.tables.diagnoser(app, r).await?;
+            baselines(app, Some(m), &r.hash, diagnoser).await?
+        }
         None => Arc::new(Baselines::default()),
     };
     let (fitted, counts) = (&b.pooled, &b.counts);
@@ -466,6 +476,7 @@ pub async fn baseline_json(app: &AppState, m: &MachineRow) -> ApiResult<Value> {
                     "state_aware": st.is_some(),
                     "coverage": st.map(|s| s.coverage()),
                     "model": st.map(machine_model_json),
+                    "path": path_json(&b, k),
                 }),
             )
         })

@@ -302,6 +302,25 @@ async fn a_tachometer_machine_is_judged_at_its_operating_state(b: Backend) {
             }
             _ => panic!("{model}"),
         }
+        // The transfer path through the table: the 35 and 40 Hz records carry line ratios
+        // (30 Hz lies outside the table), so a path is calibrated or refused with the reason.
+        let path = &c["path"];
+        match path["status"].as_str() {
+            Some("calibrated") => {
+                assert_eq!(path["f1_hz"].as_array().unwrap().len(), 2, "{path}");
+                assert!(
+                    path["residual_db"].as_f64().unwrap()
+                        < path["plain_residual_db"].as_f64().unwrap(),
+                    "{path}"
+                );
+            }
+            Some("refused") => assert!(
+                path["reason"].as_str().unwrap().contains("plain model"),
+                "{path}"
+            ),
+            _ => panic!("{path}"),
+        }
+        eprintln!("channel {ch}: path {}", path["status"]);
     }
     assert!(bl["channels"].get("tacho").is_none(), "{bl}");
 

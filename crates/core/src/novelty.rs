@@ -106,6 +106,10 @@ pub struct RecordFeatures {
     /// model is calibrated on ([`crate::condition::machine_model`]).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub lines: Vec<crate::condition::machine_model::LineLevel>,
+    /// The table's plain reading of the record's lines ([`crate::diagnosis::machine_path`]):
+    /// what the machine's transfer path is calibrated on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ratios: Option<crate::diagnosis::machine_path::LineRatios>,
 }
 
 impl RecordFeatures {

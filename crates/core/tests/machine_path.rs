@@ -3,7 +3,7 @@
 //! calibration sees only the healthy records' diagnoses; the path is configured here only.
 
 use gearwear_core::closed_loop::virtual_rig::{RigEffects, RigSpec, generate};
-use gearwear_core::diagnosis::machine_path::PathCalibration;
+use gearwear_core::diagnosis::machine_path::{LineRatios, PathCalibration};
 use gearwear_core::diagnosis::{DiagnoseOptions, diagnose};
 use gearwear_core::error::Error;
 use gearwear_core::signature::SignatureTable;
@@ -45,7 +45,7 @@ fn calibration(table: &SignatureTable, peak: f64) -> Result<PathCalibration, Err
     for (i, om) in [0.7, 0.85, 1.0, 1.15, 1.3].into_iter().enumerate() {
         for k in 0..2 {
             let (r, o) = record(table, 0.1, om, peak, 500 + (2 * i + k) as u64);
-            healthy.push(diagnose(&r, table, &o).unwrap());
+            healthy.push(LineRatios::of(&diagnose(&r, table, &o).unwrap()));
         }
     }
     PathCalibration::fit(table, &DiagnoseOptions::default(), &healthy)
@@ -99,7 +99,7 @@ fn one_speed_is_refused() {
     let healthy: Vec<_> = (0..4)
         .map(|k| {
             let (r, o) = record(&table, 0.1, 1.0, 5.0, 700 + k);
-            diagnose(&r, &table, &o).unwrap()
+            LineRatios::of(&diagnose(&r, &table, &o).unwrap())
         })
         .collect();
     let e = PathCalibration::fit(&table, &DiagnoseOptions::default(), &healthy).unwrap_err();

@@ -281,9 +281,13 @@ impl RecordRequest {
             tacho_index,
         )?;
         let units = crate::service::units::machine_units(ctx.machine.as_ref())?;
-        let baselines =
-            crate::service::machines::baselines(app, ctx.machine.as_ref(), &ctx.gearbox_row.hash)
-                .await?;
+        let baselines = crate::service::machines::baselines(
+            app,
+            ctx.machine.as_ref(),
+            &ctx.gearbox_row.hash,
+            ctx.diagnoser.clone(),
+        )
+        .await?;
         let calibration = app
             .store
             .get_calibration(machine_id)
@@ -328,6 +332,7 @@ impl AssessJob {
             state_baselines: &self.baselines.states,
             baseline_counts: &self.baselines.counts,
             calibration: self.calibration.as_ref(),
+            paths: &self.baselines.paths,
             thresholds: self.thresholds,
             units: std::mem::take(&mut self.units),
         };

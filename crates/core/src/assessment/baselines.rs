@@ -9,12 +9,17 @@
 //! * where at least [`crate::condition::baseline::MIN_STATE_RECORDS`] records carry a measured
 //!   state, also the state-aware one ([`state_baseline`]);
 //! * a fit that fails leaves the channel without that baseline, and the error is kept in
-//!   [`Baselines::unfitted`] for the caller to report.
+//!   [`Baselines::unfitted`] for the caller to report;
+//! * with the gearbox's table ([`Baselines::with_paths`]), where at least
+//!   [`crate::diagnosis::machine_path::MIN_RECORDS`] records carry the table's line ratios, the
+//!   channel's transfer path ([`PathCalibration`]), or why it was refused.
 
 use std::collections::BTreeMap;
 
 use super::condition::state_baseline;
+use super::diagnoser::TableDiagnoser;
 use crate::condition::StateBaseline;
+use crate::diagnosis::machine_path::{self, LineRatios, PathCalibration};
 use crate::error::{Error, Result};
 use crate::novelty::{MIN_BASELINE_RECORDS, MachineBaseline, RecordFeatures};
 
@@ -29,6 +34,10 @@ pub struct Baselines {
     pub counts: BTreeMap<String, usize>,
     /// Channels whose pooled or state-aware fit failed, with the error.
     pub unfitted: BTreeMap<String, Error>,
+    /// Each channel's transfer path calibrated on its records' line ratios.
+    pub paths: BTreeMap<String, PathCalibration>,
+    /// Channels whose records carry enough line ratios but whose path was refused, and why.
+    pub path_refusals: BTreeMap<String, String>,
 }
 
 impl Baselines {
@@ -59,6 +68,33 @@ impl Baselines {
             }
         }
         b
+    }
+
+    /// These baselines with each channel's transfer path calibrated through the table of
+    /// `diagnoser` (none without one: the table is not ready).
+    pub fn with_paths(
+        mut self,
+        by_channel: &BTreeMap<String, Vec<RecordFeatures>>,
+        diagnoser: Option<&TableDiagnoser>,
+    ) -> Baselines {
+        let Some(d) = diagnoser else {
+            return self;
+        };
+        for (name, feats) in by_channel {
+            let ratios: Vec<LineRatios> = feats.iter().filter_map(|f| f.ratios.clone()).collect();
+            if ratios.len() < machine_path::MIN_RECORDS {
+                continue;
+            }
+            match PathCalibration::fit(d.table(), &d.options(None), &ratios) {
+                Ok(p) => {
+                    self.paths.insert(name.clone(), p);
+                }
+                Err(e) => {
+                    self.path_refusals.insert(name.clone(), e.to_string());
+                }
+            }
+        }
+        self
     }
 
     /// For a caller that was given baseline records and needs every channel's pooled

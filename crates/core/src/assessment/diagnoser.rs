@@ -9,6 +9,7 @@ use serde_json::Value;
 
 use crate::closed_loop::held::{HeldEffects, MAX_CORRECTION_DB, refit_moves_wear};
 use crate::closed_loop::{CalibrateOptions, HeldRefit, calibrate, refit_held};
+use crate::diagnosis::machine_path::LineRatios;
 use crate::diagnosis::{
     DiagnoseOptions, Diagnosis, Matcher, diagnose_with, diagnose_with_spectrum,
 };
@@ -88,6 +89,9 @@ pub struct TableReading {
     /// calibration-corrected copy), tracked with the table's gearbox: the record's baseline
     /// features reuse it.
     pub order: Option<crate::novelty::OrderAnalysis>,
+    /// The plain table's line ratios of the record as received, before a calibrated path
+    /// re-read it: what a baseline record keeps for the path's calibration.
+    pub ratios: Option<LineRatios>,
 }
 
 impl TableReading {
@@ -145,7 +149,8 @@ impl TableDiagnoser {
         self.table.model_hash.clone()
     }
 
-    fn options(&self, shaft_hz: Option<f64>) -> DiagnoseOptions {
+    /// The diagnosis options at `shaft_hz`.
+    pub fn options(&self, shaft_hz: Option<f64>) -> DiagnoseOptions {
         let mut opts = self.opts.clone();
         opts.shaft_hz = shaft_hz;
         opts
@@ -302,7 +307,9 @@ impl TableDiagnoser {
                 };
             }
         }
+        let ratios = corrected.is_none().then(|| LineRatios::of(&d));
         Ok(TableReading {
+            ratios,
             diagnosis: d,
             calibration,
             wear,

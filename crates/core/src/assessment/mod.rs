@@ -47,6 +47,7 @@ pub use quality::Quality;
 pub use stored::{STORED_FEATURES_VERSION, StoredChannel, StoredFeatures};
 
 use crate::condition::{EvidencePlot, Finding, Load, OperatingState, StateBaseline, evidence_plot};
+use crate::diagnosis::machine_path::PathCalibration;
 use crate::diagnosis::{Diagnosis, Fit, WearDegree};
 use crate::gearbox::Gearbox;
 use crate::novelty::{
@@ -80,6 +81,9 @@ pub struct Machine<'a> {
     pub baseline_counts: &'a BTreeMap<String, usize>,
     /// The machine's calibration.
     pub calibration: Option<&'a MachineCalibration>,
+    /// Each channel's transfer path calibrated on its healthy records' line ratios
+    /// ([`crate::diagnosis::machine_path`]): the channel's wear is read through it.
+    pub paths: &'a BTreeMap<String, PathCalibration>,
     pub thresholds: Thresholds,
     /// What its channels' numbers are (and its ISO 20816-3 class); empty: unitless.
     pub units: MachineUnits,
@@ -398,6 +402,7 @@ fn assess_channel(
         measured,
         has_baseline,
         at_angle.is_none(),
+        machine.paths.get(&name),
     )?;
     if let (Some(r), Some(a)) = (reading.as_mut(), &at_angle) {
         r.diagnosis.order = Some(a.clone());
@@ -405,7 +410,8 @@ fn assess_channel(
         r.order = Some(a.clone());
     }
     stage("diagnosis");
-    let features = channel_features(rec, facts, machine, measured, reading.as_ref(), at_angle)?;
+    let mut features = channel_features(rec, facts, machine, measured, reading.as_ref(), at_angle)?;
+    features.ratios = reading.as_ref().and_then(|r| r.ratios.clone());
     let judged = machine
         .state_baselines
         .get(&name)
@@ -468,6 +474,7 @@ fn assess_channel(
 /// baseline (the baseline still judges it) nor for a record sent as healthy (it becomes part
 /// of that baseline: a machine's healthy records span its speeds, the table only ±15 % of the
 /// nominal one): `(None, Some(why))`.
+#[allow(clippy::too_many_arguments)]
 fn read_table(
     rec: &Record,
     facts: &RecordFacts,
@@ -475,6 +482,7 @@ fn read_table(
     measured: &Measured,
     has_baseline: bool,
     track_orders: bool,
+    path: Option<&PathCalibration>,
 ) -> crate::Result<(Option<TableReading>, Option<String>)> {
     let Some(d) = machine.diagnoser else {
         return Ok((None, None));
@@ -499,6 +507,9 @@ fn read_table(
         }
         Err(e) => return Err(e),
     };
+    if let Some(p) = path.filter(|_| machine.calibration.is_none()) {
+        through_path(&mut r, p, rec, d, shaft_hz);
+    }
     let fit = &r.diagnosis.fit;
     if fit.inflated {
         let why = format!(
@@ -510,6 +521,37 @@ fn read_table(
         r.diagnosis.wear_note = Some(why);
     }
     Ok((Some(r), None))
+}
+
+/// Read the wear of `r` again through the channel's calibrated transfer path `p`: the
+/// diagnosis's wear, fit and posterior become the path's (its order analysis and spectrum stay
+/// the record's); outside the calibrated speeds, or when the re-read fails, the plain reading
+/// stands with a warning saying why.
+fn through_path(
+    r: &mut TableReading,
+    p: &PathCalibration,
+    rec: &Record,
+    d: &TableDiagnoser,
+    shaft_hz: Option<f64>,
+) {
+    let opts = d.options(shaft_hz);
+    match p.reread(rec, d.table(), &opts, &r.diagnosis) {
+        Ok(Some(mut c)) => {
+            c.order = r.diagnosis.order.take();
+            c.order_error = r.diagnosis.order_error.take();
+            r.wear = WearInterval {
+                estimate: c.wear_degree.estimate,
+                lower: c.wear_degree.lower,
+                upper: c.wear_degree.upper,
+            };
+            r.diagnosis = c;
+        }
+        Ok(None) => r.diagnosis.warnings.push(p.outside(r.diagnosis.f1_hz)),
+        Err(e) => r.diagnosis.warnings.push(format!(
+            "the machine's calibrated transfer path could not be applied ({e}): read against \
+             the plain model"
+        )),
+    }
 }
 
 /// Why a record run at a speed the gearbox's signature table does not cover has no wear

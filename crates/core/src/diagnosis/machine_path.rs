@@ -32,7 +32,7 @@
 //! not fit the model — a local fault or a bearing makes lines the wear model cannot.
 
 use nalgebra::{DMatrix, DVector};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::{DiagnoseOptions, Diagnosis, Matcher, diagnose, diagnose_shifted};
 use crate::error::{Error, Result};
@@ -190,19 +190,39 @@ fn calibrate(rs: &[Residual], groups: usize) -> Result<Fitted> {
     })
 }
 
-/// The measured unclipped features of a diagnosis, in the table's feature order (lines but
-/// f1; the power fraction is left out: it is not a line ratio).
-fn line_features(d: &Diagnosis) -> Vec<(f64, f64)> {
-    d.lines
-        .iter()
-        .filter(|l| l.name != "f1")
-        .map(|l| {
-            (
-                l.normalised_frequency,
-                l.level_db * std::f64::consts::LN_10 / 20.0,
-            )
-        })
-        .collect()
+/// What a calibration reads of a healthy record's plain diagnosis: its speed and its lines'
+/// levels re f1, in the table's line order — kept with the record's features, so that a
+/// stored baseline can be calibrated without diagnosing it again.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LineRatios {
+    pub f1_hz: f64,
+    pub omega1: f64,
+    /// `[frequency over f1, 20 log10(A / A_f1)]` of every line but f1.
+    pub lines: Vec<[f64; 2]>,
+}
+
+impl LineRatios {
+    /// The ratios of a plain diagnosis.
+    pub fn of(d: &Diagnosis) -> LineRatios {
+        LineRatios {
+            f1_hz: d.f1_hz,
+            omega1: d.omega1,
+            lines: d
+                .lines
+                .iter()
+                .filter(|l| l.name != "f1")
+                .map(|l| [l.normalised_frequency, l.level_db])
+                .collect(),
+        }
+    }
+
+    /// The measured unclipped features `(ratio, ln)` (the power fraction is left out: it is
+    /// not a line ratio).
+    fn features(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
+        self.lines
+            .iter()
+            .map(|[r, db]| (*r, db * std::f64::consts::LN_10 / 20.0))
+    }
 }
 
 impl PathCalibration {
@@ -215,7 +235,7 @@ impl PathCalibration {
     pub fn fit(
         table: &SignatureTable,
         opts: &DiagnoseOptions,
-        healthy: &[Diagnosis],
+        healthy: &[LineRatios],
     ) -> Result<PathCalibration> {
         let matcher = Matcher::new(table, opts)?;
         let healthy_ea = table.grid.ea[0];
@@ -243,15 +263,14 @@ impl PathCalibration {
         };
         let mut rs = Vec::new();
         for d in healthy {
-            let feats = line_features(d);
-            if feats.len() + 1 != nf {
+            if d.lines.len() + 1 != nf {
                 return Err(Error::LengthMismatch {
                     what: "a healthy record's lines",
                     expected: nf - 1,
-                    found: feats.len(),
+                    found: d.lines.len(),
                 });
             }
-            for (k, (ratio, y)) in feats.into_iter().enumerate() {
+            for (k, (ratio, y)) in d.features().enumerate() {
                 let (m, v) = matcher.stats_at(k, healthy_ea, d.omega1);
                 if m <= floor + FLOOR_MARGIN || y <= floor + FLOOR_MARGIN {
                     continue;
@@ -346,15 +365,36 @@ impl PathCalibration {
         opts: &DiagnoseOptions,
     ) -> Result<Diagnosis> {
         let mut plain = diagnose(record, table, opts)?;
+        match self.reread(record, table, opts, &plain)? {
+            Some(d) => Ok(d),
+            None => {
+                plain.warnings.push(self.outside(plain.f1_hz));
+                Ok(plain)
+            }
+        }
+    }
+
+    /// Why a record at `f1_hz` is read against the plain model.
+    pub fn outside(&self, f1_hz: f64) -> String {
+        format!(
+            "f1 = {f1_hz:.1} Hz lies outside the speeds the machine's transfer path was \
+             calibrated at ({:.1}–{:.1} Hz): read against the plain model",
+            self.f1_hz[0],
+            self.f1_hz[self.f1_hz.len() - 1]
+        )
+    }
+
+    /// `record` read through the calibrated path, from its `plain` diagnosis (which gives the
+    /// speed); `None` outside the calibrated speeds.
+    pub fn reread(
+        &self,
+        record: &Record,
+        table: &SignatureTable,
+        opts: &DiagnoseOptions,
+        plain: &Diagnosis,
+    ) -> Result<Option<Diagnosis>> {
         if !self.covers(plain.f1_hz) {
-            plain.warnings.push(format!(
-                "f1 = {:.1} Hz lies outside the calibrated speeds ({:.1}–{:.1} Hz): read \
-                 against the plain model",
-                plain.f1_hz,
-                self.f1_hz[0],
-                self.f1_hz[self.f1_hz.len() - 1]
-            ));
-            return Ok(plain);
+            return Ok(None);
         }
         let (shift, var) = self.shift_at(table, plain.f1_hz);
         let held = DiagnoseOptions {
@@ -362,6 +402,11 @@ impl PathCalibration {
             ..opts.clone()
         };
         let mut d = diagnose_shifted(record, table, &held, &shift, &var)?;
+        d.warnings.push(format!(
+            "wear read through the machine's transfer path calibrated on its {} healthy records \
+             (left-out residual {:.1} dB against {:.1} dB for the plain model)",
+            self.records, self.residual_after_db, self.residual_before_db
+        ));
         if d.fit.inflated {
             let why = format!(
                 "no wear figure: the model seen through the machine's calibrated path does not \
@@ -372,7 +417,7 @@ impl PathCalibration {
             d.wear_degree.withheld = Some(why.clone());
             d.wear_note = Some(why);
         }
-        Ok(d)
+        Ok(Some(d))
     }
 
     /// The path (Hz, dB relative to its own level) at its knots.
