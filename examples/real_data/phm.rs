@@ -417,7 +417,10 @@ fn fit_baseline(
             by_channel.entry(name.to_string()).or_default().push(f);
         }
     }
-    let b = Baselines::fit(&by_channel).require_all().expect("baseline");
+    let b = Baselines::fit(&by_channel)
+        .require_all()
+        .expect("baseline")
+        .with_paths(&by_channel, diagnoser);
     (b, t0.elapsed().as_secs_f64())
 }
 

@@ -48,7 +48,7 @@ pub use stored::{STORED_FEATURES_VERSION, StoredChannel, StoredFeatures};
 
 use crate::condition::{EvidencePlot, Finding, Load, OperatingState, StateBaseline, evidence_plot};
 use crate::diagnosis::machine_path::PathCalibration;
-use crate::diagnosis::{Diagnosis, Fit, WearDegree};
+use crate::diagnosis::{DiagnoseOptions, Diagnosis, Fit, WearDegree};
 use crate::gearbox::Gearbox;
 use crate::novelty::{
     MIN_BASELINE_RECORDS, MachineBaseline, Novelty, OrderAnalysis, RecordFeatures,
@@ -534,7 +534,11 @@ fn through_path(
     d: &TableDiagnoser,
     shaft_hz: Option<f64>,
 ) {
-    let opts = d.options(shaft_hz);
+    // The plain reading's order analysis stands: the re-read need not track the record again.
+    let opts = DiagnoseOptions {
+        track_orders: false,
+        ..d.options(shaft_hz)
+    };
     match p.reread(rec, d.table(), &opts, &r.diagnosis) {
         Ok(Some(mut c)) => {
             c.order = r.diagnosis.order.take();
