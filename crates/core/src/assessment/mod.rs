@@ -543,6 +543,15 @@ fn through_path(
         Ok(Some(mut c)) => {
             c.order = r.diagnosis.order.take();
             c.order_error = r.diagnosis.order_error.take();
+            // The record's own warnings first (the same reading of the same record gives most
+            // of them again), then what the path adds.
+            let mut warnings = std::mem::take(&mut r.diagnosis.warnings);
+            for w in c.warnings.drain(..) {
+                if !warnings.contains(&w) {
+                    warnings.push(w);
+                }
+            }
+            c.warnings = warnings;
             r.wear = WearInterval {
                 estimate: c.wear_degree.estimate,
                 lower: c.wear_degree.lower,
