@@ -228,7 +228,6 @@ pub struct MachineModel {
     lines: Vec<(LineKey, f64, String)>,
     /// Speed range (Hz) per load.
     ranges: Vec<(Option<Load>, f64, f64)>,
-    sigma: [f64; 3],
     pub report: CalibrationReport,
 }
 
@@ -601,7 +600,6 @@ impl MachineModel {
             fit,
             lines,
             ranges,
-            sigma,
             report,
         };
         match (
@@ -640,7 +638,7 @@ impl MachineModel {
                     kind: key.0,
                     feature: feature.clone(),
                     level_db: level,
-                    sigma_db: self.sigma[key.0.index()],
+                    sigma_db: self.report.sigma_db[key.0.index()],
                 })
             })
             .collect()
@@ -677,7 +675,7 @@ impl MachineModel {
 
     /// Prediction uncertainty per family (dB): mesh, sideband, shaft.
     pub fn sigma_db(&self) -> [f64; 3] {
-        self.sigma
+        self.report.sigma_db
     }
 }
 
