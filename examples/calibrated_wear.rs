@@ -9,21 +9,34 @@
 //! - healthy baseline: wear ea = 0.1 (the table's lowest) at Ω1 = 0.7, 0.85, 1.0, 1.15, 1.3,
 //!   two records each;
 //! - judged: ea = 0.2, 0.3, …, 1.0, two records each at Ω1 drawn in [0.75, 1.25]; and three
-//!   records with a damaged input-pinion tooth (stiffness loss 0.6, ea = 0.3), which must get
-//!   no wear figure;
-//! - read twice: the plain diagnosis and the diagnosis through the calibrated path
-//!   ([`gearwear::diagnosis::machine_path`]); a figure, its error, whether the truth lies in
+//!   records with a damaged input-pinion tooth (stiffness loss 0.6, ea = 0.3) and three with the
+//!   input shaft modulating mesh 1 (eccentricity 0.1 b, ea = 0.3), which must get no wear
+//!   figure;
+//! - read three times: the plain diagnosis, the diagnosis through the calibrated path
+//!   ([`gearwear::diagnosis::machine_path`]), and the product's assessment of a machine whose
+//!   baseline is the healthy records (state-aware, its path calibrated; the wear withheld when
+//!   the record's change is mostly one part's); a figure, its error, whether the truth lies in
 //!   its 90 % interval.
 //!
 //! Every record's speed is read by a tachometer (the diagnosis is given the shaft's rate);
 //! `CW_TACHOLESS=1` finds it in the spectrum instead. Env: `CW_SEED` (default 1) moves every
-//! draw; `CW_PEAK` the mode's peak gain; `CW_DEBUG=1` prints each judged record's fit (χ² per
+//! draw; `CW_PEAK` the mode's peak gain; `CW_TOOTH_LOSS` the damaged tooth's stiffness loss;
+//! `CW_DEBUG=1` prints each judged record's fit (χ² per
 //! feature) and its shafts' TSA FM4.
 
+use std::collections::BTreeMap;
+
+use gearwear::assessment::{
+    Baselines, GearboxRef, Machine, RecordFacts, TableDiagnoser, TachoChannel, Thresholds, assess,
+    baseline_features,
+};
 use gearwear::closed_loop::effects::reference_gears;
 use gearwear::closed_loop::virtual_rig::{RigEffects, RigSpec, generate};
 use gearwear::diagnosis::machine_path::{LineRatios, PathCalibration};
 use gearwear::diagnosis::{DiagnoseOptions, Diagnosis, diagnose};
+use gearwear::gearbox::Gearbox;
+use gearwear::novelty::RecordFeatures;
+use gearwear::record::Record;
 use gearwear::signature::SignatureTable;
 use gearwear::signature::SplitMix64;
 use gearwear::signature::table::default_table_path;
@@ -39,8 +52,37 @@ const SNR_DB: f64 = 25.0;
 struct Truth {
     ea: f64,
     omega1: f64,
-    tooth: bool,
+    part: Part,
     seed: u64,
+}
+
+/// The part a judged record's change is made of besides its wear.
+#[derive(Clone, Copy, PartialEq)]
+enum Part {
+    /// Wear alone.
+    None,
+    /// A damaged input-pinion tooth.
+    Tooth,
+    /// The input shaft's modulation of mesh 1 (eccentricity, 0.1 b).
+    Shaft,
+}
+
+impl Part {
+    fn label(self) -> &'static str {
+        match self {
+            Part::None => "–",
+            Part::Tooth => "damaged tooth",
+            Part::Shaft => "shaft modulation",
+        }
+    }
+}
+
+/// The damaged tooth's stiffness loss: `CW_TOOTH_LOSS`, 0.6 by default.
+fn tooth_loss() -> f64 {
+    std::env::var("CW_TOOTH_LOSS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0.6)
 }
 
 fn spec(t: Truth, f_ref: f64, peak: f64, pinion_ratio: f64) -> RigSpec {
@@ -56,7 +98,8 @@ fn spec(t: Truth, f_ref: f64, peak: f64, pinion_ratio: f64) -> RigSpec {
         seed: t.seed,
         effects: RigEffects {
             path_peak: Some((mode_hz / f1, 0.05, peak)),
-            tooth: t.tooth.then_some((pinion_ratio, 0.6)),
+            tooth: (t.part == Part::Tooth).then_some((pinion_ratio, tooth_loss())),
+            eccentricity: (t.part == Part::Shaft).then_some(0.1),
             ..Default::default()
         },
     }
@@ -65,11 +108,104 @@ fn spec(t: Truth, f_ref: f64, peak: f64, pinion_ratio: f64) -> RigSpec {
 /// A wear figure `(estimate, lower, upper)`, `None` when withheld.
 type Reading = Option<(f64, f64, f64)>;
 
-/// A judged record: its truth, the plain reading and the calibrated one.
+/// A judged record: its truth, the plain reading, the calibrated one and the assessment's.
 struct Row {
     truth: Truth,
     plain: Reading,
     calibrated: Reading,
+    assessed: Reading,
+}
+
+/// The record's one channel as the assessment takes it.
+const CHANNEL: &str = "a1";
+
+/// The machine as the product holds it: the rig's gearbox described, its table, and the
+/// baselines fitted from the healthy records.
+fn machine<'a>(gb: &'a Gearbox, d: &'a TableDiagnoser, b: &'a Baselines) -> Machine<'a> {
+    Machine {
+        gearbox: gb,
+        gearbox_ref: GearboxRef {
+            id: "calibrated-wear-rig".into(),
+            name: gb.name().into(),
+            hash: gb.hash.clone(),
+            table_status: gearwear::signature::TableStatus::Ready,
+            table_progress: 1.0,
+        },
+        described: true,
+        diagnoser: Some(d),
+        table_note: None,
+        input_shaft_hz: None,
+        baselines: &b.pooled,
+        state_baselines: &b.states,
+        baseline_counts: &b.counts,
+        calibration: None,
+        paths: &b.paths,
+        thresholds: Thresholds::default(),
+        units: Default::default(),
+    }
+}
+
+/// Tachometer pulses per revolution of the input shaft.
+const PULSES_PER_REV: usize = 10;
+
+/// The record's vibration channel and, with a shaft rate known (`shaft_hz`), a tachometer
+/// channel of [`PULSES_PER_REV`] square pulses per revolution (0/5 V, half duty), with its
+/// facts: the product measures the speed from those pulses, as from a machine's tachometer.
+fn channels(
+    rec: &Record,
+    shaft_hz: Option<f64>,
+    healthy: bool,
+) -> (Vec<(String, Vec<f64>)>, RecordFacts) {
+    let mut ch = vec![(CHANNEL.to_string(), rec.samples.clone())];
+    if let Some(f) = shaft_hz {
+        let rate = f * PULSES_PER_REV as f64;
+        let pulses = (0..rec.samples.len())
+            .map(|i| {
+                let phase = (i as f64 / rec.sample_rate * rate).fract();
+                if phase < 0.5 { 5.0 } else { 0.0 }
+            })
+            .collect();
+        ch.push(("tach".into(), pulses));
+    }
+    let facts = RecordFacts {
+        sample_rate_hz: rec.sample_rate,
+        shaft_hz,
+        declared_healthy: healthy,
+        tacho: shaft_hz.map(|_| TachoChannel {
+            name: "tach".into(),
+            pulses_per_rev: PULSES_PER_REV,
+        }),
+        ..Default::default()
+    };
+    (ch, facts)
+}
+
+/// The wear the product's assessment gives the record (none when it withholds it or refuses
+/// the record), and its novelty and findings (kind, share) in a line.
+fn assessed(rec: &Record, shaft_hz: Option<f64>, m: &Machine) -> (Reading, String) {
+    let (mut ch, facts) = channels(rec, shaft_hz, false);
+    let a = match assess(&mut ch, &[0], &facts, m, &mut |_| {}) {
+        Ok(a) => a,
+        Err(e) => return (None, format!("refused: {e}")),
+    };
+    let novelty = a.novelty.as_ref().map_or("none".into(), |n| {
+        format!("{:.2}/{:.2}", n.score, n.threshold)
+    });
+    let findings: Vec<String> = a
+        .findings
+        .iter()
+        .map(|f| format!("{} {:.2}", f.kind, f.share))
+        .collect();
+    let withheld = a
+        .deciding_channel()
+        .reading
+        .as_ref()
+        .and_then(|r| r.diagnosis.wear_degree.withheld.as_deref())
+        .map_or(String::new(), |w| format!(" withheld: {w}"));
+    (
+        a.wear().map(|w| (w.estimate, w.lower, w.upper)),
+        format!("novelty {novelty} [{}]{withheld}", findings.join(", ")),
+    )
 }
 
 /// Mean absolute error, interval coverage and count of the figures given.
@@ -125,7 +261,7 @@ fn main() {
             healthy.push(Truth {
                 ea: 0.1,
                 omega1: om,
-                tooth: false,
+                part: Part::None,
                 seed: seed * 1000 + (2 * i + k) as u64,
             });
         }
@@ -136,7 +272,7 @@ fn main() {
             judged.push(Truth {
                 ea: 0.2 + 0.1 * i as f64,
                 omega1: rng.range(0.75, 1.25),
-                tooth: false,
+                part: Part::None,
                 seed: seed * 1000 + 100 + (2 * i + k) as u64,
             });
         }
@@ -145,17 +281,28 @@ fn main() {
         judged.push(Truth {
             ea: 0.3,
             omega1: rng.range(0.75, 1.25),
-            tooth: true,
+            part: Part::Tooth,
             seed: seed * 1000 + 200 + k,
         });
     }
+    for k in 0..3 {
+        judged.push(Truth {
+            ea: 0.3,
+            omega1: rng.range(0.75, 1.25),
+            part: Part::Shaft,
+            seed: seed * 1000 + 300 + k,
+        });
+    }
     let t0 = std::time::Instant::now();
-    let base: Vec<Diagnosis> = healthy
+    let shaft_hz = |t: &Truth| opts_for(t).shaft_hz;
+    let healthy_records: Vec<Record> = healthy
         .par_iter()
-        .map(|t| {
-            let r = generate(&gb, &spec(*t, f_ref, peak, pinion)).expect("rig");
-            diagnose(&r, &table, &opts_for(t)).expect("healthy diagnosis")
-        })
+        .map(|t| generate(&gb, &spec(*t, f_ref, peak, pinion)).expect("rig"))
+        .collect();
+    let base: Vec<Diagnosis> = healthy_records
+        .par_iter()
+        .zip(&healthy)
+        .map(|(r, t)| diagnose(r, &table, &opts_for(t)).expect("healthy diagnosis"))
         .collect();
     let ratios: Vec<LineRatios> = base.iter().map(LineRatios::of).collect();
     let cal = match PathCalibration::fit(&table, &opts, &ratios) {
@@ -177,12 +324,41 @@ fn main() {
         "healthy records with a plain wear figure: {plain_base}/{}",
         base.len()
     );
+    let diagnoser = TableDiagnoser::new(table.clone(), opts.clone()).expect("table");
+    let empty = Baselines::default();
+    let m0 = machine(&gb, &diagnoser, &empty);
+    let feats: Vec<RecordFeatures> = healthy_records
+        .par_iter()
+        .zip(&healthy)
+        .map(|(r, t)| {
+            let (mut ch, facts) = channels(r, shaft_hz(t), true);
+            baseline_features(&mut ch, &[0], &facts, &m0)
+                .expect("healthy features")
+                .remove(0)
+        })
+        .collect();
+    let by_channel = BTreeMap::from([(CHANNEL.to_string(), feats)]);
+    let baselines = Baselines::fit(&by_channel).with_paths(&by_channel, Some(&diagnoser));
+    println!(
+        "the machine's baseline: state-aware {}, path {}",
+        if baselines.states.contains_key(CHANNEL) {
+            "fitted"
+        } else {
+            "not fitted"
+        },
+        baselines
+            .path_refusals
+            .get(CHANNEL)
+            .map_or("calibrated".to_string(), |why| format!("refused ({why})"))
+    );
+    let m = machine(&gb, &diagnoser, &baselines);
     let rows: Vec<Row> = judged
         .par_iter()
         .map(|t| {
             let r = generate(&gb, &spec(*t, f_ref, peak, pinion)).expect("rig");
             let plain = wear(&diagnose(&r, &table, &opts_for(t)));
             let cd = cal.diagnose(&r, &table, &opts_for(t));
+            let (assessed, leading) = assessed(&r, shaft_hz(t), &m);
             if std::env::var("CW_DEBUG").is_ok()
                 && let Ok(d) = &cd
             {
@@ -193,9 +369,9 @@ fn main() {
                     .map(|s| format!("{}:{:.1}", s.shaft, s.metrics.fm4.unwrap_or(f64::NAN)))
                     .collect();
                 eprintln!(
-                    "ea {:.2} tooth {} chi2/f {:.2} fm4 {}",
+                    "ea {:.2} {} chi2/f {:.2} fm4 {} finding {leading}",
                     t.ea,
-                    t.tooth,
+                    t.part.label(),
                     d.fit.chi2_per_feature,
                     fm4.join(" ")
                 );
@@ -205,11 +381,12 @@ fn main() {
                 truth: *t,
                 plain,
                 calibrated,
+                assessed,
             }
         })
         .collect();
     println!(
-        "\n| ea | Ω1 | tooth | plain: ea [90 %] | calibrated: ea [90 %] |\n| --- | --- | --- | --- | --- |"
+        "\n| ea | Ω1 | part | plain: ea [90 %] | calibrated: ea [90 %] | assessed: ea [90 %] |\n| --- | --- | --- | --- | --- | --- |"
     );
     let cell = |w: &Option<(f64, f64, f64)>| {
         w.map_or("no figure".into(), |(e, lo, hi)| {
@@ -220,35 +397,51 @@ fn main() {
         truth: t,
         plain: p,
         calibrated: c,
+        assessed: a,
     } in &rows
     {
         println!(
-            "| {:.2} | {:.3} | {} | {} | {} |",
+            "| {:.2} | {:.3} | {} | {} | {} | {} |",
             t.ea,
             t.omega1,
-            if t.tooth { "damaged" } else { "–" },
+            t.part.label(),
             cell(p),
-            cell(c)
+            cell(c),
+            cell(a)
         );
     }
     print_scores(&rows);
     println!("({:.0} s)", t0.elapsed().as_secs_f64());
 }
 
-/// The wear records' scores, plain and calibrated, and the damaged-tooth records' figures.
+/// The wear records' scores (plain, calibrated, assessed) and how many of the records with a
+/// part's change got no figure.
 fn print_scores(rows: &[Row]) {
-    let wear_rows = |calibrated: bool| -> Vec<(Truth, Reading)> {
+    let wear_rows = |pick: fn(&Row) -> Reading| -> Vec<(Truth, Reading)> {
         rows.iter()
-            .filter(|r| !r.truth.tooth)
-            .map(|r| (r.truth, if calibrated { r.calibrated } else { r.plain }))
+            .filter(|r| r.truth.part == Part::None)
+            .map(|r| (r.truth, pick(r)))
             .collect()
     };
-    println!("\nwear records, plain: {}", score(&wear_rows(false)));
-    println!("wear records, calibrated: {}", score(&wear_rows(true)));
-    let tooth: Vec<&Row> = rows.iter().filter(|r| r.truth.tooth).collect();
-    let null = tooth.iter().filter(|r| r.calibrated.is_none()).count();
+    println!("\nwear records, plain: {}", score(&wear_rows(|r| r.plain)));
     println!(
-        "damaged-tooth records with no calibrated figure: {null}/{}",
-        tooth.len()
+        "wear records, calibrated: {}",
+        score(&wear_rows(|r| r.calibrated))
     );
+    println!(
+        "wear records, assessed: {}",
+        score(&wear_rows(|r| r.assessed))
+    );
+    for part in [Part::Tooth, Part::Shaft] {
+        let of: Vec<&Row> = rows.iter().filter(|r| r.truth.part == part).collect();
+        let null = |pick: fn(&Row) -> Reading| of.iter().filter(|r| pick(r).is_none()).count();
+        println!(
+            "{} records with no figure: calibrated {}/{}, assessed {}/{}",
+            part.label(),
+            null(|r| r.calibrated),
+            of.len(),
+            null(|r| r.assessed),
+            of.len()
+        );
+    }
 }

@@ -2,12 +2,18 @@
 //! housing mode fixed in Hz and an unknown gain, healthy at five speeds, then worn. The
 //! calibration sees only the healthy records' diagnoses; the path is configured here only.
 
+use std::collections::BTreeMap;
+
+use gearwear_core::assessment::{
+    Baselines, GearboxRef, Machine, RecordFacts, TableDiagnoser, TachoChannel, Thresholds, assess,
+    baseline_features,
+};
 use gearwear_core::closed_loop::virtual_rig::{RigEffects, RigSpec, generate};
 use gearwear_core::diagnosis::machine_path::{LineRatios, PathCalibration};
 use gearwear_core::diagnosis::{DiagnoseOptions, diagnose};
 use gearwear_core::error::Error;
-use gearwear_core::signature::SignatureTable;
 use gearwear_core::signature::table::default_table_path;
+use gearwear_core::signature::{SignatureTable, TableStatus};
 
 /// A record at wear `ea` and speed `omega1` through a peaking mode at 1.3 × the reference
 /// mesh frequency (ζ 0.05, peak gain `peak`), gain 37, 25 dB SNR, 16 kHz, 0.6 s.
@@ -104,4 +110,101 @@ fn one_speed_is_refused() {
         .collect();
     let e = PathCalibration::fit(&table, &DiagnoseOptions::default(), &healthy).unwrap_err();
     assert!(matches!(e, Error::BaselineTooSmall { .. }), "{e}");
+}
+
+/// The record's vibration channel and a 10-pulse tachometer at the rig's shaft rate, as a
+/// machine sends them, with their facts.
+fn channels(
+    r: &gearwear_core::record::Record,
+    o: &DiagnoseOptions,
+    healthy: bool,
+) -> (Vec<(String, Vec<f64>)>, RecordFacts) {
+    let shaft_hz = o.shaft_hz.unwrap();
+    let tach = (0..r.samples.len())
+        .map(|i| {
+            let phase = (i as f64 / r.sample_rate * shaft_hz * 10.0).fract();
+            if phase < 0.5 { 5.0 } else { 0.0 }
+        })
+        .collect();
+    let facts = RecordFacts {
+        sample_rate_hz: r.sample_rate,
+        shaft_hz: Some(shaft_hz),
+        declared_healthy: healthy,
+        tacho: Some(TachoChannel {
+            name: "tach".into(),
+            pulses_per_rev: 10,
+        }),
+        ..Default::default()
+    };
+    (
+        vec![("a1".into(), r.samples.clone()), ("tach".into(), tach)],
+        facts,
+    )
+}
+
+fn machine<'a>(table: &'a SignatureTable, d: &'a TableDiagnoser, b: &'a Baselines) -> Machine<'a> {
+    let gb = table.gearbox();
+    Machine {
+        gearbox: gb,
+        gearbox_ref: GearboxRef {
+            id: "rig".into(),
+            name: gb.name().into(),
+            hash: gb.hash.clone(),
+            table_status: TableStatus::Ready,
+            table_progress: 1.0,
+        },
+        described: true,
+        diagnoser: Some(d),
+        table_note: None,
+        input_shaft_hz: None,
+        baselines: &b.pooled,
+        state_baselines: &b.states,
+        baseline_counts: &b.counts,
+        calibration: None,
+        paths: &b.paths,
+        thresholds: Thresholds::default(),
+        units: Default::default(),
+    }
+}
+
+/// The product's door reads the same: a machine whose baseline is the healthy records (posted
+/// with a tachometer) calibrates its channel's path, and its assessment of a worn record gives
+/// the wear the library's calibrated reading gives.
+#[test]
+fn the_assessment_reads_the_wear_through_the_machines_path() {
+    let table = SignatureTable::load(&default_table_path()).unwrap();
+    let d = TableDiagnoser::new(table.clone(), DiagnoseOptions::default()).unwrap();
+    let empty = Baselines::default();
+    let m0 = machine(&table, &d, &empty);
+    let mut feats = Vec::new();
+    let mut healthy = Vec::new();
+    for (i, om) in [0.7, 0.85, 1.0, 1.15, 1.3].into_iter().enumerate() {
+        for k in 0..2 {
+            let (r, o) = record(&table, 0.1, om, 15.0, 500 + (2 * i + k) as u64);
+            healthy.push(LineRatios::of(&diagnose(&r, &table, &o).unwrap()));
+            let (mut ch, facts) = channels(&r, &o, true);
+            feats.push(
+                baseline_features(&mut ch, &[0], &facts, &m0)
+                    .unwrap()
+                    .remove(0),
+            );
+        }
+    }
+    let cal = PathCalibration::fit(&table, &DiagnoseOptions::default(), &healthy).unwrap();
+    let by_channel = BTreeMap::from([("a1".to_string(), feats)]);
+    let b = Baselines::fit(&by_channel).with_paths(&by_channel, Some(&d));
+    assert!(b.paths.contains_key("a1"), "{:?}", b.path_refusals);
+    let m = machine(&table, &d, &b);
+    for (i, (ea, om)) in [(0.4, 1.2), (0.7, 1.1)].into_iter().enumerate() {
+        let (r, o) = record(&table, ea, om, 15.0, 900 + i as u64);
+        let lib = cal.diagnose(&r, &table, &o).unwrap().wear_degree;
+        let (mut ch, facts) = channels(&r, &o, false);
+        let a = assess(&mut ch, &[0], &facts, &m, &mut |_| {}).unwrap();
+        let w = a.wear().expect("a wear figure");
+        assert!(
+            (w.estimate - lib.estimate).abs() < 0.02,
+            "ea {ea}: {w:?} vs {lib:?}"
+        );
+        assert!((w.estimate - ea).abs() < 0.1, "ea {ea}: {w:?}");
+    }
 }

@@ -205,7 +205,7 @@ function wearText(l, m) {
   if (!l) return "–";
   const w = l.wear_degree;
   if (w && num(w.estimate)) return w.estimate.toFixed(3);
-  if (l.wear_note) return "no wear figure (poor fit: the model does not fit this record)";
+  if (l.wear_note) return noWearText(l.wear_note);
   const g = m.gearbox || {};
   if (g.status && g.status !== "ready") return "no wear figure (the gearbox's table is not ready)";
   return "no wear figure";

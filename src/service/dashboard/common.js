@@ -209,3 +209,14 @@ function note(svg, W, H, text) {
 function tooltip(node, text) { el("title", {}, node, text); }
 
 const CHART = { W: 480, H: 240, pad: { l: 40, r: 10, t: 20, b: 34 } };
+/**
+ * Why a diagnosis with a `wear_note` has no wear figure, in a few words: the record's change
+ * is one part's (a gear, a shaft, a bearing), or the model does not fit it. `short` drops the
+ * explanation (the fleet table's cell).
+ */
+function noWearText(wearNote, short) {
+  if (/ of this record's change is one part's/.test(wearNote)) {
+    return short ? "no wear figure (one part's change)" : "no wear figure (the change is one part's, not wear)";
+  }
+  return short ? "no wear figure (poor fit)" : "no wear figure (poor fit: the model does not fit this record)";
+}

@@ -426,9 +426,15 @@ fn assess_channel(
             None,
         ),
     };
+    let part_change = reading
+        .as_mut()
+        .is_some_and(|r| withhold_for_part(r, &findings));
     let note = table_miss.as_deref().or(machine.table_note.as_deref());
     let mut alert = alert(
-        reading.as_ref().map(TableReading::alert_wear),
+        reading
+            .as_ref()
+            .filter(|_| !part_change)
+            .map(TableReading::alert_wear),
         novelty.as_ref(),
         &machine.thresholds,
         note,
@@ -521,6 +527,30 @@ fn read_table(
         r.diagnosis.wear_note = Some(why);
     }
     Ok((Some(r), None))
+}
+
+/// Withhold the wear figure of a reading whose record changed mostly at one part
+/// ([`crate::condition::findings::mostly_one_part`]: a gear's local damage or eccentricity,
+/// a shaft, a bearing): the line ratios the table reads moved for that part, not for the
+/// clearance every tooth shares. `true` when it withheld a figure the reading gave (the alert
+/// then follows the baseline alone).
+fn withhold_for_part(r: &mut TableReading, findings: &[Finding]) -> bool {
+    let Some(f) = crate::condition::findings::mostly_one_part(findings) else {
+        return false;
+    };
+    if r.diagnosis.wear_degree.withheld.is_some() {
+        return false;
+    }
+    let why = format!(
+        "no wear figure: {:.0} % of this record's change is one part's ({}), not of the wear \
+         kind (a stage's mesh lines moving together); a wear degree read off it would be that \
+         part's change",
+        100.0 * f.share,
+        f.summary
+    );
+    r.diagnosis.wear_degree.withheld = Some(why.clone());
+    r.diagnosis.wear_note = Some(why);
+    true
 }
 
 /// Read the wear of `r` again through the channel's calibrated transfer path `p`: the

@@ -78,6 +78,30 @@ pub struct Finding {
     pub evidence: Vec<Evidence>,
 }
 
+/// Does a finding of `kind` name a part (a gear's local damage or eccentricity, a shaft, a
+/// bearing) rather than a change every tooth or the whole path shares?
+pub fn names_part(kind: &str) -> bool {
+    matches!(
+        kind,
+        "gear-local-damage" | "gear-eccentricity" | "shaft" | "bearing"
+    )
+}
+
+/// Share of a record's change a part's finding must explain for the change to be that part's
+/// ("mostly": more than every other cause together).
+pub const MOSTLY: f64 = 0.5;
+
+/// The part a record's change mostly belongs to: a finding that names a part and explains at
+/// least [`MOSTLY`] of the change. Such a change is not of the wear kind — wear moves a
+/// stage's mesh lines together (`mesh-lines`) — so a wear figure read off the record would be
+/// the part's, not the teeth's. `None` without findings, or when no part explains most of the
+/// change (a common change leads, or most of it is unexplained).
+pub fn mostly_one_part(findings: &[Finding]) -> Option<&Finding> {
+    findings
+        .iter()
+        .find(|f| names_part(f.kind) && f.share >= MOSTLY)
+}
+
 /// Is `feature` a line amplitude (its change reads in dB) rather than a metric?
 fn is_amplitude(feature: &str) -> bool {
     !(feature.starts_with("tsa.") || feature == "stat.kurtosis")
@@ -587,6 +611,26 @@ mod tests {
         let f = run(&changes);
         assert_eq!(f[0].kind, "transfer-path", "{f:#?}");
         assert!(f[0].detail.as_deref().unwrap().contains("mesh harmonics"));
+    }
+
+    /// Every mesh line up together (wear's pattern) leaves the change no part's; a shaft's
+    /// line or a bearing's makes it that part's.
+    #[test]
+    fn only_a_part_leading_the_change_makes_it_one_parts() {
+        let r = reference();
+        let up: Vec<(&str, f64)> = r
+            .iter()
+            .filter(|(k, _)| k.starts_with("lines.mesh."))
+            .map(|(k, _)| (k.as_str(), 0.7))
+            .collect();
+        let f = run(&up);
+        assert!(f.iter().any(|x| x.kind == "mesh-lines"), "{f:#?}");
+        assert!(mostly_one_part(&f).is_none(), "{f:#?}");
+        let f = run(&[("shaft.in.1x", 1.5)]);
+        assert_eq!(mostly_one_part(&f).map(|x| x.kind), Some("shaft"));
+        let f = run(&[("bearing.b-out.bpfi", 1.5), ("env.none", 0.3)]);
+        assert_eq!(mostly_one_part(&f).map(|x| x.kind), Some("bearing"));
+        assert!(mostly_one_part(&[]).is_none());
     }
 
     /// A change in a metric no candidate fits is unexplained.

@@ -17,7 +17,7 @@ use serde::Serialize;
 
 use super::baseline::StateScore;
 use super::explain::Cause;
-use super::findings::{Finding, explained};
+use super::findings::{Finding, explained, names_part};
 use super::parts::Parts;
 
 /// dB per ln unit of amplitude.
@@ -58,12 +58,7 @@ pub struct MeasuredLoop {
 impl MeasuredLoop {
     /// The first accepted effect that names a part (a gear, a shaft or a bearing).
     pub fn first_part(&self) -> Option<&LoopStep> {
-        self.steps.iter().find(|s| {
-            matches!(
-                s.kind,
-                "gear-local-damage" | "gear-eccentricity" | "shaft" | "bearing"
-            )
-        })
+        self.steps.iter().find(|s| names_part(s.kind))
     }
 }
 
