@@ -234,26 +234,9 @@ fn wear(d: &gearwear::Result<Diagnosis>) -> Reading {
     (w.withheld.is_none() && !d.fit.inflated).then_some((w.estimate, w.lower, w.upper))
 }
 
-fn main() {
-    let seed: u64 = std::env::var("CW_SEED")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(1);
-    let peak: f64 = std::env::var("CW_PEAK")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(5.0);
-    let table = SignatureTable::load(&default_table_path()).expect("the paper rig's table");
-    let gb = table.gearbox().clone();
-    let f_ref = gb.reference_frequency_hz();
-    let pinion = reference_gears(&gb)[0].shaft_ratio;
-    let tacho_less = std::env::var("CW_TACHOLESS").is_ok();
-    // A tachometer reads the shaft's true rate; without one the speed is found in the spectrum.
-    let opts_for = |t: &Truth| DiagnoseOptions {
-        shaft_hz: (!tacho_less).then(|| t.omega1 * f_ref / gb.f1_per_input_hz),
-        ..DiagnoseOptions::default()
-    };
-    let opts = DiagnoseOptions::default();
+/// The healthy records' truths and the judged ones' (chosen before any run; see the module
+/// docs), each draw moved by `seed`.
+fn truths(seed: u64) -> (Vec<Truth>, Vec<Truth>) {
     let mut rng = SplitMix64::new(seed * 7919);
     let mut healthy = Vec::new();
     for (i, om) in [0.7, 0.85, 1.0, 1.15, 1.3].into_iter().enumerate() {
@@ -293,6 +276,97 @@ fn main() {
             seed: seed * 1000 + 300 + k,
         });
     }
+    (healthy, judged)
+}
+
+/// The machine's baselines from its healthy records as the product fits them (state-aware,
+/// each channel's path calibrated), posted with a tachometer when `shaft_hz` gives the rate.
+fn machine_baselines(
+    records: &[Record],
+    truths: &[Truth],
+    gb: &Gearbox,
+    diagnoser: &TableDiagnoser,
+    shaft_hz: &(dyn Fn(&Truth) -> Option<f64> + Sync),
+) -> Baselines {
+    let empty = Baselines::default();
+    let m0 = machine(gb, diagnoser, &empty);
+    let feats: Vec<RecordFeatures> = records
+        .par_iter()
+        .zip(truths)
+        .map(|(r, t)| {
+            let (mut ch, facts) = channels(r, shaft_hz(t), true);
+            baseline_features(&mut ch, &[0], &facts, &m0)
+                .expect("healthy features")
+                .remove(0)
+        })
+        .collect();
+    let by_channel = BTreeMap::from([(CHANNEL.to_string(), feats)]);
+    let baselines = Baselines::fit(&by_channel).with_paths(&by_channel, Some(diagnoser));
+    println!(
+        "the machine's baseline: state-aware {}, path {}",
+        if baselines.states.contains_key(CHANNEL) {
+            "fitted"
+        } else {
+            "not fitted"
+        },
+        baselines
+            .path_refusals
+            .get(CHANNEL)
+            .map_or("calibrated".to_string(), |why| format!("refused ({why})"))
+    );
+    baselines
+}
+
+/// Every judged record's truth and its three readings, a Markdown table.
+fn print_rows(rows: &[Row]) {
+    println!(
+        "\n| ea | Ω1 | part | plain: ea [90 %] | calibrated: ea [90 %] | assessed: ea [90 %] |\n| --- | --- | --- | --- | --- | --- |"
+    );
+    let cell = |w: &Option<(f64, f64, f64)>| {
+        w.map_or("no figure".into(), |(e, lo, hi)| {
+            format!("{e:.3} [{lo:.3}, {hi:.3}]")
+        })
+    };
+    for Row {
+        truth: t,
+        plain: p,
+        calibrated: c,
+        assessed: a,
+    } in rows
+    {
+        println!(
+            "| {:.2} | {:.3} | {} | {} | {} | {} |",
+            t.ea,
+            t.omega1,
+            t.part.label(),
+            cell(p),
+            cell(c),
+            cell(a)
+        );
+    }
+}
+
+fn main() {
+    let seed: u64 = std::env::var("CW_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1);
+    let peak: f64 = std::env::var("CW_PEAK")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(5.0);
+    let table = SignatureTable::load(&default_table_path()).expect("the paper rig's table");
+    let gb = table.gearbox().clone();
+    let f_ref = gb.reference_frequency_hz();
+    let pinion = reference_gears(&gb)[0].shaft_ratio;
+    let tacho_less = std::env::var("CW_TACHOLESS").is_ok();
+    // A tachometer reads the shaft's true rate; without one the speed is found in the spectrum.
+    let opts_for = |t: &Truth| DiagnoseOptions {
+        shaft_hz: (!tacho_less).then(|| t.omega1 * f_ref / gb.f1_per_input_hz),
+        ..DiagnoseOptions::default()
+    };
+    let opts = DiagnoseOptions::default();
+    let (healthy, judged) = truths(seed);
     let t0 = std::time::Instant::now();
     let shaft_hz = |t: &Truth| opts_for(t).shaft_hz;
     let healthy_records: Vec<Record> = healthy
@@ -325,32 +399,7 @@ fn main() {
         base.len()
     );
     let diagnoser = TableDiagnoser::new(table.clone(), opts.clone()).expect("table");
-    let empty = Baselines::default();
-    let m0 = machine(&gb, &diagnoser, &empty);
-    let feats: Vec<RecordFeatures> = healthy_records
-        .par_iter()
-        .zip(&healthy)
-        .map(|(r, t)| {
-            let (mut ch, facts) = channels(r, shaft_hz(t), true);
-            baseline_features(&mut ch, &[0], &facts, &m0)
-                .expect("healthy features")
-                .remove(0)
-        })
-        .collect();
-    let by_channel = BTreeMap::from([(CHANNEL.to_string(), feats)]);
-    let baselines = Baselines::fit(&by_channel).with_paths(&by_channel, Some(&diagnoser));
-    println!(
-        "the machine's baseline: state-aware {}, path {}",
-        if baselines.states.contains_key(CHANNEL) {
-            "fitted"
-        } else {
-            "not fitted"
-        },
-        baselines
-            .path_refusals
-            .get(CHANNEL)
-            .map_or("calibrated".to_string(), |why| format!("refused ({why})"))
-    );
+    let baselines = machine_baselines(&healthy_records, &healthy, &gb, &diagnoser, &shaft_hz);
     let m = machine(&gb, &diagnoser, &baselines);
     let rows: Vec<Row> = judged
         .par_iter()
@@ -385,31 +434,7 @@ fn main() {
             }
         })
         .collect();
-    println!(
-        "\n| ea | Ω1 | part | plain: ea [90 %] | calibrated: ea [90 %] | assessed: ea [90 %] |\n| --- | --- | --- | --- | --- | --- |"
-    );
-    let cell = |w: &Option<(f64, f64, f64)>| {
-        w.map_or("no figure".into(), |(e, lo, hi)| {
-            format!("{e:.3} [{lo:.3}, {hi:.3}]")
-        })
-    };
-    for Row {
-        truth: t,
-        plain: p,
-        calibrated: c,
-        assessed: a,
-    } in &rows
-    {
-        println!(
-            "| {:.2} | {:.3} | {} | {} | {} | {} |",
-            t.ea,
-            t.omega1,
-            t.part.label(),
-            cell(p),
-            cell(c),
-            cell(a)
-        );
-    }
+    print_rows(&rows);
     print_scores(&rows);
     println!("({:.0} s)", t0.elapsed().as_secs_f64());
 }
