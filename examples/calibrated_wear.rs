@@ -27,8 +27,7 @@
 use std::collections::BTreeMap;
 
 use gearwear::assessment::{
-    Baselines, GearboxRef, Machine, RecordFacts, TableDiagnoser, TachoChannel, Thresholds, assess,
-    baseline_features,
+    Baselines, Machine, RecordFacts, TableDiagnoser, TachoChannel, assess, baseline_features,
 };
 use gearwear::closed_loop::effects::reference_gears;
 use gearwear::closed_loop::virtual_rig::{RigEffects, RigSpec, generate};
@@ -122,27 +121,7 @@ const CHANNEL: &str = "a1";
 /// The machine as the product holds it: the rig's gearbox described, its table, and the
 /// baselines fitted from the healthy records.
 fn machine<'a>(gb: &'a Gearbox, d: &'a TableDiagnoser, b: &'a Baselines) -> Machine<'a> {
-    Machine {
-        gearbox: gb,
-        gearbox_ref: GearboxRef {
-            id: "calibrated-wear-rig".into(),
-            name: gb.name().into(),
-            hash: gb.hash.clone(),
-            table_status: gearwear::signature::TableStatus::Ready,
-            table_progress: 1.0,
-        },
-        described: true,
-        diagnoser: Some(d),
-        table_note: None,
-        input_shaft_hz: None,
-        baselines: &b.pooled,
-        state_baselines: &b.states,
-        baseline_counts: &b.counts,
-        calibration: None,
-        paths: &b.paths,
-        thresholds: Thresholds::default(),
-        units: Default::default(),
-    }
+    Machine::described("calibrated-wear-rig", gb, Some(d), b)
 }
 
 /// Tachometer pulses per revolution of the input shaft.

@@ -14,8 +14,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use gearwear::assessment::{
-    Assessment, Baselines, GearboxRef, Machine, RecordFacts, TableDiagnoser, TachoChannel,
-    Thresholds, assess, baseline_features,
+    Assessment, Baselines, Machine, RecordFacts, TableDiagnoser, TachoChannel, assess,
+    baseline_features,
 };
 use gearwear::condition::Load;
 use gearwear::diagnosis::DiagnoseOptions;
@@ -165,27 +165,7 @@ pub fn machine<'a>(
     diagnoser: Option<&'a TableDiagnoser>,
     baselines: &'a Baselines,
 ) -> Machine<'a> {
-    Machine {
-        gearbox: gb,
-        gearbox_ref: GearboxRef {
-            id: format!("phm09-{}", t.name),
-            name: gb.name().into(),
-            hash: gb.hash.clone(),
-            table_status: gearwear::signature::TableStatus::Ready,
-            table_progress: 1.0,
-        },
-        described: true,
-        diagnoser,
-        table_note: None,
-        input_shaft_hz: None,
-        baselines: &baselines.pooled,
-        state_baselines: &baselines.states,
-        baseline_counts: &baselines.counts,
-        calibration: None,
-        paths: &baselines.paths,
-        thresholds: Thresholds::default(),
-        units: Default::default(),
-    }
+    Machine::described(&format!("phm09-{}", t.name), gb, diagnoser, baselines)
 }
 
 /// One judged record's outcome.

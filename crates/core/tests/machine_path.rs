@@ -5,15 +5,14 @@
 use std::collections::BTreeMap;
 
 use gearwear_core::assessment::{
-    Baselines, GearboxRef, Machine, RecordFacts, TableDiagnoser, TachoChannel, Thresholds, assess,
-    baseline_features,
+    Baselines, Machine, RecordFacts, TableDiagnoser, TachoChannel, assess, baseline_features,
 };
 use gearwear_core::closed_loop::virtual_rig::{RigEffects, RigSpec, generate};
 use gearwear_core::diagnosis::machine_path::{LineRatios, PathCalibration};
 use gearwear_core::diagnosis::{DiagnoseOptions, diagnose};
 use gearwear_core::error::Error;
+use gearwear_core::signature::SignatureTable;
 use gearwear_core::signature::table::default_table_path;
-use gearwear_core::signature::{SignatureTable, TableStatus};
 
 /// A record at wear `ea` and speed `omega1` through a peaking mode at 1.3 × the reference
 /// mesh frequency (ζ 0.05, peak gain `peak`), gain 37, 25 dB SNR, 16 kHz, 0.6 s.
@@ -143,28 +142,7 @@ fn channels(
 }
 
 fn machine<'a>(table: &'a SignatureTable, d: &'a TableDiagnoser, b: &'a Baselines) -> Machine<'a> {
-    let gb = table.gearbox();
-    Machine {
-        gearbox: gb,
-        gearbox_ref: GearboxRef {
-            id: "rig".into(),
-            name: gb.name().into(),
-            hash: gb.hash.clone(),
-            table_status: TableStatus::Ready,
-            table_progress: 1.0,
-        },
-        described: true,
-        diagnoser: Some(d),
-        table_note: None,
-        input_shaft_hz: None,
-        baselines: &b.pooled,
-        state_baselines: &b.states,
-        baseline_counts: &b.counts,
-        calibration: None,
-        paths: &b.paths,
-        thresholds: Thresholds::default(),
-        units: Default::default(),
-    }
+    Machine::described("rig", table.gearbox(), Some(d), b)
 }
 
 /// The product's door reads the same: a machine whose baseline is the healthy records (posted

@@ -89,6 +89,40 @@ pub struct Machine<'a> {
     pub units: MachineUnits,
 }
 
+impl<'a> Machine<'a> {
+    /// A machine with a described gearbox whose table is ready (`diagnoser`), judged against
+    /// `baselines` (pooled, state-aware and paths), with the default thresholds, no closed-loop
+    /// calibration and unitless channels: what a study of a gearbox's records sets up.
+    pub fn described(
+        id: &str,
+        gearbox: &'a Gearbox,
+        diagnoser: Option<&'a TableDiagnoser>,
+        baselines: &'a Baselines,
+    ) -> Machine<'a> {
+        Machine {
+            gearbox,
+            gearbox_ref: GearboxRef {
+                id: id.into(),
+                name: gearbox.name().into(),
+                hash: gearbox.hash.clone(),
+                table_status: crate::signature::TableStatus::Ready,
+                table_progress: 1.0,
+            },
+            described: true,
+            diagnoser,
+            table_note: None,
+            input_shaft_hz: None,
+            baselines: &baselines.pooled,
+            state_baselines: &baselines.states,
+            baseline_counts: &baselines.counts,
+            calibration: None,
+            paths: &baselines.paths,
+            thresholds: Thresholds::default(),
+            units: Default::default(),
+        }
+    }
+}
+
 /// What came with the record.
 #[derive(Debug, Clone, Default)]
 pub struct RecordFacts {
