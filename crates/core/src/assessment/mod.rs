@@ -333,6 +333,19 @@ pub fn assess(
     machine: &Machine,
     stage: &mut dyn FnMut(&'static str),
 ) -> crate::Result<Assessment> {
+    assess_drawing(channels, chosen, facts, machine, stage, true)
+}
+
+/// [`assess`], with the evidence plot drawn only when `draw` (a baseline's features need
+/// none).
+fn assess_drawing(
+    channels: &mut [(String, Vec<f64>)],
+    chosen: &[usize],
+    facts: &RecordFacts,
+    machine: &Machine,
+    stage: &mut dyn FnMut(&'static str),
+    draw: bool,
+) -> crate::Result<Assessment> {
     let mut quality = quality::inspect_channels(channels, chosen, facts.sample_rate_hz, machine)?;
     let measured = condition::measure_record(channels, chosen, facts, machine)?;
     let setup = setup::check(channels, chosen, facts, machine, &measured);
@@ -342,7 +355,8 @@ pub fn assess(
         measured,
         setup,
     };
-    assess_inspected(channels, chosen, facts, machine, inspected, stage).map_err(|e| match doubt {
+    let a = assess_inspected(channels, chosen, facts, machine, inspected, stage, draw);
+    a.map_err(|e| match doubt {
         Some(f) if quality::rate_explains(&e) => quality::rate_refusal(f, &e),
         _ => e,
     })
@@ -364,6 +378,7 @@ fn assess_inspected(
     machine: &Machine,
     inspected: Inspected,
     stage: &mut dyn FnMut(&'static str),
+    draw: bool,
 ) -> crate::Result<Assessment> {
     let Inspected {
         quality,
@@ -392,7 +407,7 @@ fn assess_inspected(
     }
     let mut a = assemble(assessed, facts, machine, &measured, quality, setup);
     a.evidence_plot = match (&measured.angle, &measured.parts) {
-        (Some(angle), Some(parts)) => {
+        (Some(angle), Some(parts)) if draw => {
             let (name, x) = &channels[chosen[a.deciding]];
             evidence_plot(name, x, facts.sample_rate_hz, angle, parts).ok()
         }
@@ -410,7 +425,7 @@ pub fn baseline_features(
     facts: &RecordFacts,
     machine: &Machine,
 ) -> crate::Result<Vec<RecordFeatures>> {
-    let a = assess(channels, chosen, facts, machine, &mut |_| {})?;
+    let a = assess_drawing(channels, chosen, facts, machine, &mut |_| {}, false)?;
     Ok(a.assessed.into_iter().map(|c| c.features).collect())
 }
 
