@@ -30,7 +30,7 @@ use gearwear::assessment::{
     Baselines, Machine, RecordFacts, TableDiagnoser, TachoChannel, assess, baseline_features,
 };
 use gearwear::closed_loop::effects::reference_gears;
-use gearwear::closed_loop::virtual_rig::{RigEffects, RigSpec, generate};
+use gearwear::closed_loop::virtual_rig::{RigEffects, RigSpec, generate, tachometer};
 use gearwear::diagnosis::machine_path::{LineRatios, PathCalibration};
 use gearwear::diagnosis::{DiagnoseOptions, Diagnosis, diagnose};
 use gearwear::gearbox::Gearbox;
@@ -137,13 +137,7 @@ fn channels(
 ) -> (Vec<(String, Vec<f64>)>, RecordFacts) {
     let mut ch = vec![(CHANNEL.to_string(), rec.samples.clone())];
     if let Some(f) = shaft_hz {
-        let rate = f * PULSES_PER_REV as f64;
-        let pulses = (0..rec.samples.len())
-            .map(|i| {
-                let phase = (i as f64 / rec.sample_rate * rate).fract();
-                if phase < 0.5 { 5.0 } else { 0.0 }
-            })
-            .collect();
+        let pulses = tachometer(rec.samples.len(), rec.sample_rate, f, PULSES_PER_REV);
         ch.push(("tach".into(), pulses));
     }
     let facts = RecordFacts {

@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 use gearwear_core::assessment::{
     Baselines, Machine, RecordFacts, TableDiagnoser, TachoChannel, assess, baseline_features,
 };
-use gearwear_core::closed_loop::virtual_rig::{RigEffects, RigSpec, generate};
+use gearwear_core::closed_loop::virtual_rig::{RigEffects, RigSpec, generate, tachometer};
 use gearwear_core::diagnosis::machine_path::{LineRatios, PathCalibration};
 use gearwear_core::diagnosis::{DiagnoseOptions, diagnose};
 use gearwear_core::error::Error;
@@ -119,12 +119,7 @@ fn channels(
     healthy: bool,
 ) -> (Vec<(String, Vec<f64>)>, RecordFacts) {
     let shaft_hz = o.shaft_hz.unwrap();
-    let tach = (0..r.samples.len())
-        .map(|i| {
-            let phase = (i as f64 / r.sample_rate * shaft_hz * 10.0).fract();
-            if phase < 0.5 { 5.0 } else { 0.0 }
-        })
-        .collect();
+    let tach = tachometer(r.samples.len(), r.sample_rate, shaft_hz, 10);
     let facts = RecordFacts {
         sample_rate_hz: r.sample_rate,
         shaft_hz: Some(shaft_hz),
@@ -141,10 +136,6 @@ fn channels(
     )
 }
 
-fn machine<'a>(table: &'a SignatureTable, d: &'a TableDiagnoser, b: &'a Baselines) -> Machine<'a> {
-    Machine::described("rig", table.gearbox(), Some(d), b)
-}
-
 /// The product's door reads the same: a machine whose baseline is the healthy records (posted
 /// with a tachometer) calibrates its channel's path, and its assessment of a worn record gives
 /// the wear the library's calibrated reading gives.
@@ -153,7 +144,7 @@ fn the_assessment_reads_the_wear_through_the_machines_path() {
     let table = SignatureTable::load(&default_table_path()).unwrap();
     let d = TableDiagnoser::new(table.clone(), DiagnoseOptions::default()).unwrap();
     let empty = Baselines::default();
-    let m0 = machine(&table, &d, &empty);
+    let m0 = Machine::described("rig", table.gearbox(), Some(&d), &empty);
     let mut feats = Vec::new();
     let mut healthy = Vec::new();
     for (i, om) in [0.7, 0.85, 1.0, 1.15, 1.3].into_iter().enumerate() {
@@ -172,7 +163,7 @@ fn the_assessment_reads_the_wear_through_the_machines_path() {
     let by_channel = BTreeMap::from([("a1".to_string(), feats)]);
     let b = Baselines::fit(&by_channel).with_paths(&by_channel, Some(&d));
     assert!(b.paths.contains_key("a1"), "{:?}", b.path_refusals);
-    let m = machine(&table, &d, &b);
+    let m = Machine::described("rig", table.gearbox(), Some(&d), &b);
     for (i, (ea, om)) in [(0.4, 1.2), (0.7, 1.1)].into_iter().enumerate() {
         let (r, o) = record(&table, ea, om, 15.0, 900 + i as u64);
         let lib = cal.diagnose(&r, &table, &o).unwrap().wear_degree;

@@ -80,6 +80,23 @@ pub struct RigSpec {
     pub effects: RigEffects,
 }
 
+/// A tachometer channel beside a rig record of `n` samples at `fs` (Hz): `pulses_per_rev`
+/// square pulses (0/5 V, half duty) per revolution of the input shaft turning at a constant
+/// `shaft_hz` — what a machine's once- or several-per-revolution sensor sends. (A record with
+/// speed wander has no such constant rate.)
+pub fn tachometer(n: usize, fs: f64, shaft_hz: f64, pulses_per_rev: usize) -> Vec<f64> {
+    let rate = shaft_hz * pulses_per_rev as f64;
+    (0..n)
+        .map(|i| {
+            if (i as f64 / fs * rate).fract() < 0.5 {
+                5.0
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
 /// Generate the record of [`RigSpec`] (see the module docs for the chain).
 pub fn generate(gb: &Gearbox, spec: &RigSpec) -> Result<Record> {
     if !(spec.sample_rate > 0.0 && spec.duration > 0.0 && spec.gain.is_finite()) {
