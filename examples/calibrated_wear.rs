@@ -233,21 +233,15 @@ fn truths(seed: u64) -> (Vec<Truth>, Vec<Truth>) {
             });
         }
     }
-    for k in 0..3 {
-        judged.push(Truth {
-            ea: 0.3,
-            omega1: rng.range(0.75, 1.25),
-            part: Part::Tooth,
-            seed: seed * 1000 + 200 + k,
-        });
-    }
-    for k in 0..3 {
-        judged.push(Truth {
-            ea: 0.3,
-            omega1: rng.range(0.75, 1.25),
-            part: Part::Shaft,
-            seed: seed * 1000 + 300 + k,
-        });
+    for (part, first) in [(Part::Tooth, 200), (Part::Shaft, 300)] {
+        for k in 0..3 {
+            judged.push(Truth {
+                ea: 0.3,
+                omega1: rng.range(0.75, 1.25),
+                part,
+                seed: seed * 1000 + first + k,
+            });
+        }
     }
     (healthy, judged)
 }
