@@ -209,6 +209,7 @@ function note(svg, W, H, text) {
 function tooltip(node, text) { el("title", {}, node, text); }
 
 const CHART = { W: 480, H: 240, pad: { l: 40, r: 10, t: 20, b: 34 } };
+
 /**
  * Why a diagnosis with a `wear_note` has no wear figure, in a few words: the record's change
  * is one part's (a gear, a shaft, a bearing), or the model does not fit it. `short` drops the

@@ -88,7 +88,7 @@ pub fn names_part(kind: &str) -> bool {
 }
 
 /// Share of a record's change a part's finding must explain for the change to be that part's
-/// ("mostly": more than every other cause together).
+/// ("mostly": at least as much as every other cause together).
 pub const MOSTLY: f64 = 0.5;
 
 /// The part a record's change mostly belongs to: a finding that names a part and explains at
