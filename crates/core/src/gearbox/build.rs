@@ -42,13 +42,14 @@ pub use super::assumed::{
 use super::assumed::{Ctx, non_negative, positive};
 use super::coordinates::{Dofs, Train};
 use super::description::GearboxDescription;
+use super::factors::PhysicsFactors;
 pub use super::gears::GearValues;
 use super::kinematics::{Stage, Topology};
 use super::meshes;
 pub use super::meshes::MeshValues;
 use crate::error::GearboxError;
 use crate::model::assembly::Assembly;
-use crate::model::element::{Damping, Dof, Element, Load, LoadSchedule};
+use crate::model::element::{Damping, Dof, Element, Load, LoadSchedule, StiffnessShape};
 
 /// The physical model of a gearbox: every value it needs, given or assumed.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -217,21 +218,60 @@ pub fn physics(
         .iter()
         .position(|dr| dr.values.stage == s.sensor_stage)
         .expect("every stage has a mesh");
-    Ok((
-        Physics {
-            length_ref_m: s.b_ref,
-            dofs: dofs.list,
-            meshes: drafts.into_iter().map(|d| d.values).collect(),
-            shafts,
-            input_torque_nm,
-            input_dof,
-            output_dof,
-            reference_frequency_hz,
-            sensor_element,
-            dynamics_estimated: s.pinned.is_none() && cx.dynamic,
-        },
-        cx.assumed,
-    ))
+    let mut physics = Physics {
+        length_ref_m: s.b_ref,
+        dofs: dofs.list,
+        meshes: drafts.into_iter().map(|d| d.values).collect(),
+        shafts,
+        input_torque_nm,
+        input_dof,
+        output_dof,
+        reference_frequency_hz,
+        sensor_element,
+        dynamics_estimated: s.pinned.is_none() && cx.dynamic,
+    };
+    if let Some(f) = &d.physics_factors {
+        apply_factors(&mut physics, f, topo.stages.len())?;
+    }
+    Ok((physics, cx.assumed))
+}
+
+/// A machine's factors over the settled physics ([`super::factors`]): each mesh's stiffness,
+/// damping ratio, fluctuation and error scale by its stage's factors, every half-clearance by
+/// `clearance`, the input torque by `load` (a torque, so a stiffer mesh deflects less under
+/// it), and `ω_h` by the square root of the reference mesh's stiffness factor.
+fn apply_factors(p: &mut Physics, f: &PhysicsFactors, stages: usize) -> Result<(), GearboxError> {
+    f.check(stages)?;
+    for m in p.meshes.iter_mut() {
+        let s = f.stage(m.stage);
+        m.stiffness_n_per_m *= s.stiffness;
+        m.damping_ratio *= s.damping;
+        m.error_scale *= s.error;
+        m.half_clearance_m *= f.clearance;
+        m.shape = match m.shape {
+            StiffnessShape::FirstHarmonic { eps } => StiffnessShape::FirstHarmonic {
+                eps: eps * s.fluctuation,
+            },
+            StiffnessShape::SquareWave {
+                contact_ratio,
+                double_to_single,
+                smoothing,
+            } => StiffnessShape::SquareWave {
+                contact_ratio,
+                double_to_single: 1.0 + (double_to_single - 1.0) * s.fluctuation,
+                smoothing,
+            },
+            other => other,
+        };
+        m.shape
+            .validate(&m.name)
+            .map_err(|e| GearboxError::Model(format!("physics_factors: {e}")))?;
+    }
+    p.input_torque_nm *= f.load;
+    if let Some(m0) = p.meshes.first() {
+        p.reference_frequency_hz *= f.stage(m0.stage).stiffness.sqrt();
+    }
+    Ok(())
 }
 
 /// Flexible-shaft elements: each flexible shaft's coordinates chained in order, as (name,
@@ -316,13 +356,14 @@ pub fn assembly(
     }
     let mut elements = Vec::with_capacity(p.meshes.len() + p.shafts.len());
     for m in &p.meshes {
-        let amp = if m.wears {
-            ea * b_ref
-        } else if let (true, Some(pe)) = (m.planetary, planetary) {
-            pe * b_ref
-        } else {
-            m.baseline_error_m
-        };
+        let amp = m.error_scale
+            * if m.wears {
+                ea * b_ref
+            } else if let (true, Some(pe)) = (m.planetary, planetary) {
+                pe * b_ref
+            } else {
+                m.baseline_error_m
+            };
         let (a, b) = (&m.terms[0], &m.terms[1]);
         let mut el = Element::mesh(
             m.name.clone(),

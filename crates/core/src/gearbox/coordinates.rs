@@ -181,6 +181,7 @@ impl<'a> Train<'a> {
                 damping_ratio: 0.0,
                 half_clearance_m: 0.0,
                 baseline_error_m: 0.0,
+                error_scale: 1.0,
                 phase_rad: 0.0,
                 wears: self.wear_stages.contains(&k),
                 planetary,

@@ -9,6 +9,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
+use super::factors::PhysicsFactors;
 use crate::error::GearboxError;
 
 /// The format tag every description carries.
@@ -85,6 +86,12 @@ pub struct GearboxDescription {
         skip_serializing_if = "Vec::is_empty"
     )]
     pub bearings: Vec<BearingSpec>,
+    /// A machine's own physics over these values: per-stage factors of the meshes' stiffness,
+    /// damping, fluctuation and transmission error, of the load and of the clearance
+    /// ([`super::factors`]; fitted to a machine's healthy records by
+    /// [`crate::diagnosis::machine_physics`]). Absent: the description's values.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub physics_factors: Option<PhysicsFactors>,
 }
 
 /// A rolling-element bearing (`[[bearing]]`): its shaft and either its geometry or its

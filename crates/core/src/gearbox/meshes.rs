@@ -32,6 +32,10 @@ pub struct MeshValues {
     pub half_clearance_m: f64,
     /// Composite error when the mesh does not wear (m).
     pub baseline_error_m: f64,
+    /// Factor on the mesh's composite error, whichever gives it (the wear degree, the
+    /// baseline, a planetary override): a machine's own transmission error over the
+    /// description's ([`super::factors::StageFactors::error`]); 1 without factors.
+    pub error_scale: f64,
     pub phase_rad: f64,
     /// True when the wear degree drives this mesh's error.
     pub wears: bool,

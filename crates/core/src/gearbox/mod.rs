@@ -19,6 +19,7 @@ pub mod build;
 mod coordinates;
 pub mod description;
 pub mod export;
+pub mod factors;
 mod gears;
 pub mod kinematics;
 mod meshes;
@@ -31,6 +32,7 @@ use sha2::{Digest, Sha256};
 pub use crate::error::GearboxError;
 pub use build::{AssumedValue, MeshValues, Physics};
 pub use description::{BearingSpec, DefectOrders, GearboxDescription, TextFormat};
+pub use factors::{PhysicsFactors, StageFactors};
 pub use kinematics::{Fixed, Kinematics, Stage, Topology};
 
 use crate::model::{Assembly, Wear};
@@ -116,6 +118,19 @@ impl Gearbox {
         };
         let d = GearboxDescription::parse(&text, fmt, &path.display().to_string())?;
         Ok(Self::new(d)?)
+    }
+
+    /// This gearbox with a machine's own physics ([`factors`]) in place of any it had: the
+    /// same description with `physics_factors` set (so another hash, and its own table).
+    pub fn with_factors(&self, f: &PhysicsFactors) -> Result<Self, GearboxError> {
+        let mut d = self.description.clone();
+        d.physics_factors = (!f.is_identity()).then(|| f.clone());
+        Self::new(d)
+    }
+
+    /// The description's own physics factors (none: every factor 1).
+    pub fn factors(&self) -> PhysicsFactors {
+        self.description.physics_factors.clone().unwrap_or_default()
     }
 
     /// The first paper's test rig.

@@ -1,4 +1,5 @@
 use super::*;
+use crate::model::DimensionlessModel;
 
 fn parse(text: &str) -> Result<Gearbox, GearboxError> {
     Gearbox::parse(text, "test")
@@ -506,4 +507,134 @@ fn the_sensor_stage_picks_the_simulated_element() {
         (x2 - b2).abs() < 2.0,
         "sensor at stage 2: mean {x2}, clearance {b2}"
     );
+}
+
+#[test]
+fn unit_physics_factors_change_nothing_and_the_description_hashes_as_before() {
+    let gb = Gearbox::paper_rig();
+    let same = gb.with_factors(&PhysicsFactors::default()).unwrap();
+    assert_eq!(same.hash, gb.hash, "identity factors are not written");
+    let ones = PhysicsFactors {
+        stages: vec![StageFactors::default(); 3],
+        ..Default::default()
+    };
+    let mut d = gb.description.clone();
+    d.physics_factors = Some(ones);
+    let written = Gearbox::new(d).unwrap();
+    assert_ne!(
+        written.hash, gb.hash,
+        "the block is part of the description"
+    );
+    assert_eq!(written.physics, gb.physics, "factors of 1 change no value");
+    let (a, b) = (
+        gb.assembly(Wear::fixed_axis(0.4))
+            .unwrap()
+            .resolve()
+            .unwrap(),
+        written
+            .assembly(Wear::fixed_axis(0.4))
+            .unwrap()
+            .resolve()
+            .unwrap(),
+    );
+    assert_eq!(a.a, b.a);
+    assert_eq!(
+        (a.k_ratio.clone(), a.c.clone(), a.f.clone()),
+        (b.k_ratio, b.c, b.f)
+    );
+    assert_eq!(a.omega_h, b.omega_h);
+}
+
+#[test]
+fn physics_factors_scale_what_they_name() {
+    let gb = Gearbox::paper_rig();
+    let f = PhysicsFactors {
+        stages: vec![
+            StageFactors {
+                stiffness: 1.44,
+                damping: 2.0,
+                fluctuation: 1.5,
+                error: 0.5,
+            },
+            StageFactors {
+                error: 2.0,
+                ..Default::default()
+            },
+        ],
+        load: 1.3,
+        clearance: 0.8,
+    };
+    let fitted = gb.with_factors(&f).unwrap();
+    // ω_h = √(k_1 A_11): a 1.44 × stiffer reference mesh moves it by 1.2.
+    assert!(close(
+        fitted.reference_frequency_hz(),
+        1.2 * gb.reference_frequency_hz(),
+        1e-12
+    ));
+    let (m0, m1) = (&fitted.physics.meshes[0], &gb.physics.meshes[0]);
+    assert!(close(
+        m0.stiffness_n_per_m,
+        1.44 * m1.stiffness_n_per_m,
+        1e-12
+    ));
+    assert!(close(m0.damping_ratio, 2.0 * m1.damping_ratio, 1e-12));
+    assert!(close(m0.half_clearance_m, 0.8 * m1.half_clearance_m, 1e-12));
+    assert!(close(
+        fitted.physics.input_torque_nm,
+        1.3 * gb.physics.input_torque_nm,
+        1e-12
+    ));
+    let model = fitted
+        .assembly(Wear::fixed_axis(0.4))
+        .unwrap()
+        .resolve()
+        .unwrap();
+    let plain = gb
+        .assembly(Wear::fixed_axis(0.4))
+        .unwrap()
+        .resolve()
+        .unwrap();
+    // The wear mesh of stage 1 carries 0.5 × ea, stage 2's 2 × ea; the planetary meshes keep
+    // theirs; the fluctuation is 1.5 × 0.2.
+    let amp = |m: &DimensionlessModel, i: usize| m.error[i][0].amplitude;
+    assert!(close(amp(&model, 0), 0.5 * amp(&plain, 0), 1e-12));
+    assert!(close(amp(&model, 1), 2.0 * amp(&plain, 1), 1e-12));
+    assert!(close(amp(&model, 2), amp(&plain, 2), 1e-12));
+    match model.shape[0] {
+        crate::model::StiffnessShape::FirstHarmonic { eps } => assert!(close(eps, 0.3, 1e-12)),
+        ref s => panic!("{s:?}"),
+    }
+    // The stage-1 stiffness is the reference: every other mesh's ratio to it falls by 1.44.
+    assert!(close(model.k_ratio[1], plain.k_ratio[1] / 1.44, 1e-12));
+}
+
+#[test]
+fn physics_factors_out_of_range_are_refused_by_name() {
+    let gb = Gearbox::paper_rig();
+    let f = PhysicsFactors {
+        stages: vec![StageFactors {
+            fluctuation: 6.0,
+            ..Default::default()
+        }],
+        ..Default::default()
+    };
+    let e = gb.with_factors(&f).unwrap_err().to_string();
+    assert!(e.contains("fluctuation"), "{e}");
+    let f = PhysicsFactors {
+        load: 0.0,
+        ..Default::default()
+    };
+    let e = gb.with_factors(&f).unwrap_err().to_string();
+    assert!(e.contains("physics_factors.load"), "{e}");
+    let f = PhysicsFactors {
+        stages: vec![
+            StageFactors {
+                damping: 2.0,
+                ..Default::default()
+            };
+            4
+        ],
+        ..Default::default()
+    };
+    assert!(gb.with_factors(&f).is_err(), "the rig has three stages");
 }
