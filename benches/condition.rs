@@ -103,6 +103,8 @@ fn main() {
         baseline_counts: &empty_c,
         calibration: None,
         paths: &empty_paths,
+        own_model: None,
+        extends_tables: false,
         thresholds: Thresholds::default(),
         units: Default::default(),
     };
@@ -131,6 +133,8 @@ fn main() {
         state_baselines: &fitted.states,
         baseline_counts: &fitted.counts,
         paths: &fitted.paths,
+        own_model: None,
+        extends_tables: false,
         ..machine
     };
     // The 4 s record: run 1 then run 2 of the healthy 40 Hz high-load state.

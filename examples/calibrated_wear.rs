@@ -173,7 +173,8 @@ fn assessed(rec: &Record, shaft_hz: Option<f64>, m: &Machine) -> (Reading, Strin
         .deciding_channel()
         .reading
         .as_ref()
-        .and_then(|r| r.diagnosis.wear_degree.withheld.as_deref())
+        .and_then(|r| r.diagnosis.wear_degree.withheld.as_ref())
+        .map(|w| w.note.as_str())
         .map_or(String::new(), |w| format!(" withheld: {w}"));
     (
         a.wear().map(|w| (w.estimate, w.lower, w.upper)),

@@ -314,6 +314,8 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
         baseline_counts: &no_counts,
         calibration: calibration.as_ref(),
         paths: &no_paths,
+        own_model: None,
+        extends_tables: false,
         thresholds: Thresholds {
             warning: a.warning_ea,
             alarm: a.alarm_ea,

@@ -91,6 +91,14 @@ pub enum Error {
          check the healthy records' speeds"
     )]
     PathNoBetter { path_db: f64, plain_db: f64 },
+    /// A machine's physics fit that predicts a left-out speed no better than the empirical
+    /// calibration (the description's physics through a path alone).
+    #[error(
+        "the machine's physics fitted to its healthy records predict a left-out speed's lines to \
+         {physics_db:.2} dB, no better than the description's own physics through a calibrated \
+         path ({empirical_db:.2} dB): the fit is refused and the empirical calibration stands"
+    )]
+    PhysicsNoBetter { physics_db: f64, empirical_db: f64 },
     /// Stored data (an effect, a gearbox, a report) that cannot be read or written back.
     #[error("stored {what} cannot be read or written: {reason}")]
     Stored { what: String, reason: String },

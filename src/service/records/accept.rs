@@ -333,6 +333,8 @@ impl AssessJob {
             baseline_counts: &self.baselines.counts,
             calibration: self.calibration.as_ref(),
             paths: &self.baselines.paths,
+            own_model: None,
+            extends_tables: false,
             thresholds: self.thresholds,
             units: std::mem::take(&mut self.units),
         };

@@ -289,6 +289,7 @@ mod tests {
         let ch = |name: &str, level: Level, score: f64| ChannelAssessment {
             name: name.into(),
             reading: None,
+            table_miss: None,
             features: RecordFeatures {
                 values: Default::default(),
                 indicators: serde_json::Value::Null,

@@ -27,6 +27,7 @@ pub mod condition;
 pub mod diagnoser;
 pub mod episodes;
 pub mod level;
+pub mod own_model;
 pub mod quality;
 pub mod setup;
 pub mod stored;
@@ -43,12 +44,13 @@ pub use diagnoser::{
     CalibrationUse, MachineCalibration, PathCorrection, TableDiagnoser, TableReading, WearInterval,
 };
 pub use level::{Basis, Level};
+pub use own_model::OwnModel;
 pub use quality::Quality;
 pub use stored::{STORED_FEATURES_VERSION, StoredChannel, StoredFeatures};
 
 use crate::condition::{EvidencePlot, Finding, Load, OperatingState, StateBaseline, evidence_plot};
 use crate::diagnosis::machine_path::PathCalibration;
-use crate::diagnosis::{DiagnoseOptions, Diagnosis, Fit, WearDegree};
+use crate::diagnosis::{DiagnoseOptions, Diagnosis, Fit, WearDegree, WithheldReason};
 use crate::gearbox::Gearbox;
 use crate::novelty::{
     MIN_BASELINE_RECORDS, MachineBaseline, Novelty, OrderAnalysis, RecordFeatures,
@@ -84,6 +86,13 @@ pub struct Machine<'a> {
     /// Each channel's transfer path calibrated on its healthy records' line ratios
     /// ([`crate::diagnosis::machine_path`]): the channel's wear is read through it.
     pub paths: &'a BTreeMap<String, PathCalibration>,
+    /// The machine's own model (its physics fitted to its healthy records, its own table):
+    /// a channel it was fitted on reads its wear against it, not through `paths`.
+    pub own_model: Option<&'a OwnModel>,
+    /// A record outside the gearbox's table is answered `table-in-progress`: the caller extends
+    /// the table to the record's speed and reads the record again when it is ready (the
+    /// service). `false`: `outside-table`.
+    pub extends_tables: bool,
     pub thresholds: Thresholds,
     /// What its channels' numbers are (and its ISO 20816-3 class); empty: unitless.
     pub units: MachineUnits,
@@ -117,6 +126,8 @@ impl<'a> Machine<'a> {
             baseline_counts: &baselines.counts,
             calibration: None,
             paths: &baselines.paths,
+            own_model: None,
+            extends_tables: false,
             thresholds: Thresholds::default(),
             units: Default::default(),
         }
@@ -174,6 +185,12 @@ pub enum Reading {
 pub struct NoTable {
     /// Always `None` (`null`).
     pub wear_degree: Option<WearDegree>,
+    /// Why there is no wear figure, in words, when the record ran outside the table.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub wear_note: Option<String>,
+    /// Why there is no wear figure, as a code (`table-in-progress`, `outside-table`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub wear_withheld: Option<WithheldReason>,
     /// `unknown`.
     pub motion_state: String,
     /// The record's sensor, `""` when none was given.
@@ -205,6 +222,8 @@ pub struct ChannelAssessment {
     pub name: String,
     /// The table's reading, when the gearbox's table is ready.
     pub reading: Option<TableReading>,
+    /// The record ran outside the gearbox's table (no reading).
+    pub table_miss: Option<TableMiss>,
     pub features: RecordFeatures,
     pub novelty: Option<Novelty>,
     /// The comparison with the state-aware baseline, when the channel has one.
@@ -451,7 +470,7 @@ fn assess_channel(
         measured,
         has_baseline,
         at_angle.is_none(),
-        machine.paths.get(&name),
+        &name,
     )?;
     if let (Some(r), Some(a)) = (reading.as_mut(), &at_angle) {
         r.diagnosis.order = Some(a.clone());
@@ -478,7 +497,10 @@ fn assess_channel(
     let part_change = reading
         .as_mut()
         .is_some_and(|r| withhold_for_part(r, &findings));
-    let note = table_miss.as_deref().or(machine.table_note.as_deref());
+    let note = table_miss
+        .as_ref()
+        .map(|m| m.note.as_str())
+        .or(machine.table_note.as_deref());
     let mut alert = alert(
         reading
             .as_ref()
@@ -514,6 +536,7 @@ fn assess_channel(
     Ok(ChannelAssessment {
         name,
         reading,
+        table_miss,
         features,
         novelty,
         state,
@@ -524,11 +547,24 @@ fn assess_channel(
     })
 }
 
-/// The table's reading of a channel at the measured speed, with the wear withheld when the
-/// model does not fit. A speed outside the table is not an error for a channel with a
-/// baseline (the baseline still judges it) nor for a record sent as healthy (it becomes part
-/// of that baseline: a machine's healthy records span its speeds, the table only ±15 % of the
-/// nominal one): `(None, Some(why))`.
+/// A channel whose record ran outside the gearbox's table: the input-shaft rate it ran at,
+/// the reason its answer gives and the sentence.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TableMiss {
+    /// The record's input-shaft rate (Hz), which a table extension must cover.
+    pub input_hz: f64,
+    /// [`WithheldReason::TableInProgress`] when the machine's tables are extended
+    /// ([`Machine::extends_tables`]), else [`WithheldReason::OutsideTable`].
+    pub reason: WithheldReason,
+    pub note: String,
+}
+
+/// The table's reading of channel `name` at the measured speed — against the machine's own
+/// model when it has one for the channel, else through the channel's calibrated path — with
+/// the wear withheld when the model does not fit. A speed outside the table is not an error
+/// for a channel with a baseline (the baseline still judges it), for a record sent as healthy
+/// (it becomes part of that baseline: a machine's healthy records span its speeds) nor for a
+/// machine whose tables are extended to its records' speeds: `(None, Some(miss))`.
 #[allow(clippy::too_many_arguments)]
 fn read_table(
     rec: &Record,
@@ -537,8 +573,8 @@ fn read_table(
     measured: &Measured,
     has_baseline: bool,
     track_orders: bool,
-    path: Option<&PathCalibration>,
-) -> crate::Result<(Option<TableReading>, Option<String>)> {
+    name: &str,
+) -> crate::Result<(Option<TableReading>, Option<TableMiss>)> {
     let Some(d) = machine.diagnoser else {
         return Ok((None, None));
     };
@@ -554,7 +590,7 @@ fn read_table(
             min_hz,
             max_hz,
             ..
-        }) if has_baseline || facts.declared_healthy => {
+        }) if has_baseline || facts.declared_healthy || machine.extends_tables => {
             return Ok((
                 None,
                 Some(speed_outside_table(f1_hz, min_hz, max_hz, machine)),
@@ -562,8 +598,20 @@ fn read_table(
         }
         Err(e) => return Err(e),
     };
-    if let Some(p) = path.filter(|_| machine.calibration.is_none()) {
+    let own = machine
+        .own_model
+        .filter(|m| machine.calibration.is_none() && m.physics.channels.contains_key(name));
+    if let Some(m) = own {
+        against_own_model(&mut r, m, rec, name, d, shaft_hz);
+    } else if let Some(p) = machine
+        .paths
+        .get(name)
+        .filter(|_| machine.calibration.is_none())
+    {
         through_path(&mut r, p, rec, d, shaft_hz);
+    }
+    if r.diagnosis.wear_degree.withheld.is_some() {
+        return Ok((Some(r), None));
     }
     let fit = &r.diagnosis.fit;
     if fit.inflated {
@@ -572,8 +620,7 @@ fn read_table(
              features); a wear degree read off it would be the prior's, not the machine's",
             fit.chi2_per_feature, fit.features
         );
-        r.diagnosis.wear_degree.withheld = Some(why.clone());
-        r.diagnosis.wear_note = Some(why);
+        r.diagnosis.withhold(WithheldReason::PoorFit, why);
     }
     Ok((Some(r), None))
 }
@@ -597,8 +644,7 @@ fn withhold_for_part(r: &mut TableReading, findings: &[Finding]) -> bool {
         100.0 * f.share,
         f.summary
     );
-    r.diagnosis.wear_degree.withheld = Some(why.clone());
-    r.diagnosis.wear_note = Some(why);
+    r.diagnosis.withhold(WithheldReason::OnePart, why);
     true
 }
 
@@ -648,16 +694,74 @@ fn through_path(
 
 /// Why a record run at a speed the gearbox's signature table does not cover has no wear
 /// figure, in input-shaft speeds (mesh frequencies `f1_hz`, `lo_hz`–`hi_hz` converted).
-fn speed_outside_table(f1_hz: f64, lo_hz: f64, hi_hz: f64, machine: &Machine) -> String {
+fn speed_outside_table(f1_hz: f64, lo_hz: f64, hi_hz: f64, machine: &Machine) -> TableMiss {
     let per = machine.gearbox.f1_per_input_hz;
-    format!(
-        "no wear figure: the input shaft ran at {:.2} Hz, outside the speeds the gearbox's \
-         signature table covers ({:.2}–{:.2} Hz); the machine's baseline judges this record — \
-         a wear figure at this speed needs the table computed over the machine's speeds",
-        f1_hz / per,
-        lo_hz / per,
-        hi_hz / per
-    )
+    let (input_hz, lo, hi) = (f1_hz / per, lo_hz / per, hi_hz / per);
+    if machine.extends_tables {
+        return TableMiss {
+            input_hz,
+            reason: WithheldReason::TableInProgress,
+            note: format!(
+                "no wear figure yet: the input shaft ran at {input_hz:.2} Hz, outside the \
+                 speeds the gearbox's signature table covers ({lo:.2}–{hi:.2} Hz); the table is \
+                 being extended to this speed and the record will be read again when it is \
+                 ready — meanwhile the machine's baseline judges it"
+            ),
+        };
+    }
+    TableMiss {
+        input_hz,
+        reason: WithheldReason::OutsideTable,
+        note: format!(
+            "no wear figure: the input shaft ran at {input_hz:.2} Hz, outside the speeds the \
+             gearbox's signature table covers ({lo:.2}–{hi:.2} Hz); the machine's baseline \
+             judges this record — a wear figure at this speed needs the table computed over the \
+             machine's speeds"
+        ),
+    }
+}
+
+/// Read the wear of `r` again against the machine's own model `m` (its table, the channel's
+/// path, the fit's uncertainty): the diagnosis's wear, fit and posterior become the model's
+/// (its order analysis and spectrum stay the record's; withheld outside the model's speeds
+/// or where it does not fit); when the re-read fails, the plain reading stands with a
+/// warning.
+fn against_own_model(
+    r: &mut TableReading,
+    m: &OwnModel,
+    rec: &Record,
+    name: &str,
+    d: &TableDiagnoser,
+    shaft_hz: Option<f64>,
+) {
+    let opts = d.options(shaft_hz);
+    match m
+        .physics
+        .reread(rec, name, m.diagnoser.table(), &opts, &r.diagnosis)
+    {
+        Ok(Some(mut c)) => {
+            c.order = r.diagnosis.order.take();
+            c.order_error = r.diagnosis.order_error.take();
+            let mut warnings = std::mem::take(&mut r.diagnosis.warnings);
+            for w in c.warnings.drain(..) {
+                if !warnings.contains(&w) {
+                    warnings.push(w);
+                }
+            }
+            c.warnings = warnings;
+            r.wear = WearInterval {
+                estimate: c.wear_degree.estimate,
+                lower: c.wear_degree.lower,
+                upper: c.wear_degree.upper,
+            };
+            r.diagnosis = c;
+        }
+        Ok(None) => {}
+        Err(e) => r.diagnosis.warnings.push(format!(
+            "the machine's own model could not read this record ({e}): read against the \
+             description's table"
+        )),
+    }
 }
 
 /// The channel's features: description-free ones, the per-shaft TSA (from the measured angle
@@ -719,6 +823,19 @@ fn assemble(
         None => (
             Reading::NoTable(NoTable {
                 wear_degree: None,
+                wear_note: decide.table_miss.as_ref().map(|m| m.note.clone()),
+                wear_withheld: decide.table_miss.as_ref().map(|m| m.reason).or_else(|| {
+                    machine
+                        .table_note
+                        .as_ref()
+                        .map(|_| match machine.gearbox_ref.table_status {
+                            crate::signature::TableStatus::Queued
+                            | crate::signature::TableStatus::Running => {
+                                WithheldReason::TableInProgress
+                            }
+                            _ => WithheldReason::OutsideTable,
+                        })
+                }),
                 motion_state: "unknown".into(),
                 sensor: facts.sensor.clone().unwrap_or_default(),
                 warnings: Vec::new(),

@@ -386,3 +386,39 @@ mod tests {
         assert!(d < 0.35 * s, "a level change counted: d {d} s {s}");
     }
 }
+
+/// One mesh's physics over its description's (the unknown machine of a check: every mesh
+/// its own, unlike a description's per-stage [`crate::gearbox::PhysicsFactors`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct MeshPhysics {
+    pub stiffness: f64,
+    pub damping: f64,
+    pub fluctuation: f64,
+    pub error: f64,
+}
+
+/// `gb` with each mesh's stiffness, damping ratio, first-harmonic fluctuation and error scale
+/// multiplied by its entry of `meshes` (in the physics' mesh order; missing: unchanged) and
+/// `ω_h` moved with the reference mesh's stiffness (`√factor`). The description and its hash
+/// stay the base's: this machine is not a description, it is what a description misses. A
+/// record of it at input rate `n` is at `Ω1 = f1(n) / f_ref` of the returned gearbox.
+pub fn with_mesh_physics(gb: &Gearbox, meshes: &[MeshPhysics]) -> Result<Gearbox> {
+    use crate::model::StiffnessShape;
+    let mut g = gb.clone();
+    for (m, f) in g.physics.meshes.iter_mut().zip(meshes) {
+        m.stiffness_n_per_m *= f.stiffness;
+        m.damping_ratio *= f.damping;
+        m.error_scale *= f.error;
+        if let StiffnessShape::FirstHarmonic { eps } = m.shape {
+            m.shape = StiffnessShape::FirstHarmonic {
+                eps: (eps * f.fluctuation).min(0.95),
+            };
+        }
+    }
+    if let Some(f) = meshes.first() {
+        g.physics.reference_frequency_hz *= f.stiffness.sqrt();
+    }
+    // It must still resolve.
+    g.assembly(crate::model::Wear::fixed_axis(0.5))?.resolve()?;
+    Ok(g)
+}

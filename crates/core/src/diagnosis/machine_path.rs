@@ -75,19 +75,20 @@ pub struct PathCalibration {
 /// One healthy residual: feature `k` of a record at speed group `g`, its line at `log10 Hz`
 /// `x`, f1 at `x1`, the residual `d` (ln) and its weight.
 #[derive(Debug, Clone, Copy)]
-struct Residual {
-    k: usize,
-    g: usize,
-    x: f64,
-    x1: f64,
-    d: f64,
-    w: f64,
+pub(crate) struct Residual {
+    pub(crate) k: usize,
+    pub(crate) g: usize,
+    pub(crate) x: f64,
+    pub(crate) x1: f64,
+    pub(crate) d: f64,
+    pub(crate) w: f64,
 }
 
-/// A smooth curve over `log10 Hz`.
-struct Path {
-    lo: f64,
-    values: Vec<f64>,
+/// A smooth curve over `log10 Hz` (ln units), [`KNOTS_PER_DECADE`] knots a decade from `lo`.
+#[derive(Debug, Clone)]
+pub(crate) struct Path {
+    pub(crate) lo: f64,
+    pub(crate) values: Vec<f64>,
 }
 
 impl Path {
@@ -99,12 +100,12 @@ impl Path {
         [(j, 1.0 - w), ((j + 1).min(n - 1), w)]
     }
 
-    fn at(&self, x: f64) -> f64 {
+    pub(crate) fn at(&self, x: f64) -> f64 {
         self.terms(x).iter().map(|&(j, w)| w * self.values[j]).sum()
     }
 
     /// Fit `P(x) − P(x1) ≈ d` over `rs` (weighted), smoothness `lambda`.
-    fn fit(rs: &[&Residual], lo: f64, hi: f64, lambda: f64) -> Option<Path> {
+    pub(crate) fn fit(rs: &[&Residual], lo: f64, hi: f64, lambda: f64) -> Option<Path> {
         let n = (((hi - lo) * KNOTS_PER_DECADE).ceil() as usize + 1).max(2);
         let mut p = Path {
             lo,
@@ -414,8 +415,7 @@ impl PathCalibration {
                  model does not make (local damage, a bearing, another path)",
                 d.fit.chi2_per_feature, d.fit.features
             );
-            d.wear_degree.withheld = Some(why.clone());
-            d.wear_note = Some(why);
+            d.withhold(super::WithheldReason::PoorFit, why);
         }
         Ok(Some(d))
     }

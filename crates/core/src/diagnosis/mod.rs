@@ -25,6 +25,7 @@
 
 mod inputs;
 pub mod machine_path;
+pub mod machine_physics;
 mod matcher;
 mod options;
 mod report;
@@ -34,6 +35,7 @@ pub use matcher::{Matcher, Posterior, posterior};
 pub use options::{BAND_EDGE_TOLERANCE, DiagnoseOptions};
 pub use report::{
     Baseline, Diagnosis, Fit, MatchedLine, NearEntry, PlanetaryCheck, RecordInfo, WearDegree,
+    Withheld, WithheldReason,
 };
 
 use crate::error::{Error, Result};
@@ -174,6 +176,7 @@ fn diagnose_inner(
     let diagnosis = Diagnosis {
         wear_degree: wear,
         wear_note: None,
+        wear_withheld: None,
         f1_hz: f1,
         shaft_hz: shaft,
         omega1,

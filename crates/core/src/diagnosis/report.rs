@@ -2,7 +2,7 @@
 //! posterior: the wear degree, the fit, the nearest table entries, the planetary check and the
 //! matched lines.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::inputs::Evaluation;
 use super::matcher::{Matcher, Posterior, feature_index, posterior};
@@ -29,7 +29,62 @@ pub struct WearDegree {
     /// Posterior mode.
     pub mode: f64,
     /// Why the figure is withheld from the answer (`None`: shown).
-    pub withheld: Option<String>,
+    pub withheld: Option<Withheld>,
+}
+
+/// Why a wear figure is not shown: what the pages and the API read (the `note` is for people).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum WithheldReason {
+    /// The model (through the machine's calibration, when it has one) does not fit the record.
+    PoorFit,
+    /// Most of the record's change is one part's (a gear's local damage, a shaft, a bearing),
+    /// not the wear every tooth shares.
+    OnePart,
+    /// The record ran at a speed outside the machine's calibration.
+    OutsideCalibration,
+    /// The table at the record's speed is being computed; the record is read again when it is
+    /// ready.
+    TableInProgress,
+    /// No table covers the record's speed and none will (the gearbox's table failed, or the
+    /// speed would need more simulations than the service allows).
+    OutsideTable,
+}
+
+impl WithheldReason {
+    /// The word the API writes.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            WithheldReason::PoorFit => "poor-fit",
+            WithheldReason::OnePart => "one-part",
+            WithheldReason::OutsideCalibration => "outside-calibration",
+            WithheldReason::TableInProgress => "table-in-progress",
+            WithheldReason::OutsideTable => "outside-table",
+        }
+    }
+}
+
+/// A withheld wear figure: the reason, and the sentence that explains it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Withheld {
+    pub reason: WithheldReason,
+    pub note: String,
+}
+
+impl WearDegree {
+    /// Withhold the figure (the diagnosis's `wear_note` and `wear_withheld` say it too, through
+    /// [`Diagnosis::withhold`]).
+    pub fn withhold(&mut self, reason: WithheldReason, note: impl Into<String>) {
+        self.withheld = Some(Withheld {
+            reason,
+            note: note.into(),
+        });
+    }
+
+    /// The reason it is withheld, if it is.
+    pub fn withheld_reason(&self) -> Option<WithheldReason> {
+        self.withheld.as_ref().map(|w| w.reason)
+    }
 }
 
 impl Serialize for WearDegree {
@@ -138,6 +193,9 @@ pub struct Diagnosis {
     /// Why `wear_degree` is `null`, when it is.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub wear_note: Option<String>,
+    /// The reason `wear_degree` is `null`, as a code the pages read.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub wear_withheld: Option<WithheldReason>,
     /// Stage-1 mesh frequency (Hz).
     pub f1_hz: f64,
     /// Input-shaft rate implied by f1 (Hz), `f1 / z1`.
@@ -179,6 +237,17 @@ pub struct Diagnosis {
     /// Why there is no `order` (e.g. a record of fewer than 16 revolutions).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub order_error: Option<String>,
+}
+
+impl Diagnosis {
+    /// Withhold the wear figure: `wear_degree` becomes `null`, `wear_note` says why in words
+    /// and `wear_withheld` as a code.
+    pub fn withhold(&mut self, reason: WithheldReason, note: impl Into<String>) {
+        let note = note.into();
+        self.wear_degree.withhold(reason, note.clone());
+        self.wear_note = Some(note);
+        self.wear_withheld = Some(reason);
+    }
 }
 
 /// The fit at the best table point. A poor one flattens the likelihood (Birge-ratio

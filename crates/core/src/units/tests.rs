@@ -282,7 +282,10 @@ fn the_wear_in_um_uses_the_gearbox_s_reference_length() {
     assert!((um.lower - 4.0).abs() < 1e-12);
     assert_eq!(eight.physics.length_ref_m, 8e-6);
     let withheld = crate::diagnosis::WearDegree {
-        withheld: Some("no fit".into()),
+        withheld: Some(crate::diagnosis::Withheld {
+            reason: crate::diagnosis::WithheldReason::PoorFit,
+            note: "no fit".into(),
+        }),
         ..wear
     };
     assert!(WearUm::of(&withheld, &paper).is_none());
