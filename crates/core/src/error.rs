@@ -99,6 +99,18 @@ pub enum Error {
          path ({empirical_db:.2} dB): the fit is refused and the empirical calibration stands"
     )]
     PhysicsNoBetter { physics_db: f64, empirical_db: f64 },
+    /// A table that would need more simulations than allowed to cover the speeds asked.
+    #[error(
+        "covering input-shaft rates {lo_hz:.1}–{hi_hz:.1} Hz would take {simulations} \
+         simulations, over the limit of {limit}: give the machines of this gearbox a narrower \
+         speed range, or describe the gearbox once per speed range"
+    )]
+    TableTooLarge {
+        lo_hz: f64,
+        hi_hz: f64,
+        simulations: usize,
+        limit: usize,
+    },
     /// Stored data (an effect, a gearbox, a report) that cannot be read or written back.
     #[error("stored {what} cannot be read or written: {reason}")]
     Stored { what: String, reason: String },

@@ -23,6 +23,7 @@
 //! The sensor quantity of the simulation is configurable ([`SensorQuantity`]); the default is the
 //! stage-1 relative acceleration `ẍ̄1`.
 
+pub mod coverage;
 pub mod line_set;
 pub mod precompute;
 pub mod status;
