@@ -7,6 +7,7 @@
 //! cargo run --release --example real_data -- helical      # the PHM 2009 helical records only
 //! cargo run --release --example real_data -- spur         # the PHM 2009 spur records only
 //! cargo run --release --example real_data -- phm          # both PHM 2009 trains
+//! cargo run --release --example real_data -- spur-physics # the machine's own model (physics)
 //! cargo run --release --example real_data -- a1 a3        # SpectraQuest, some channels
 //! ```
 //! Env: `GFD_DIR` (default `../shared/data/spectraquest-gfd` next to the crate),
@@ -82,11 +83,15 @@ fn f2(v: Option<f64>) -> String {
 mod calibration;
 #[path = "real_data/phm.rs"]
 mod phm;
+#[path = "real_data/physics.rs"]
+mod physics;
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     match args.first().map(String::as_str) {
         Some("helical-model") => return calibration::run(&phm::HELICAL),
+        Some("helical-physics") => return physics::run(&phm::HELICAL),
+        Some("spur-physics") => return physics::run(&phm::SPUR),
         Some("spur-model") => return calibration::run(&phm::SPUR),
         _ => {}
     }

@@ -5,6 +5,11 @@ use std::process::Command;
 fn gearwear(args: &[&str]) -> (bool, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_gearwear"))
         .args(args)
+        // The table and model cache: this test run's own, not the user's.
+        .env(
+            "GEARWEAR_CACHE_DIR",
+            std::env::temp_dir().join(format!("gearwear-cli-cache-{}", std::process::id())),
+        )
         .output()
         .expect("binary runs");
     (
@@ -443,7 +448,8 @@ fn helical_csv(path: &std::path::Path, f: f64, seed: u64, impacts: f64) {
 /// the record is judged against healthy records at its speed and load, a healthy one is not
 /// anomalous, one with impacts once per idler revolution gets findings led by a gear on the idler, and
 /// one at a speed the baseline lacks is `unknown`, naming the missing state. Without a
-/// signature table for the gearbox the answer has no wear figure and says why.
+/// signature table for the gearbox (`--cached-only`: nothing is computed) the answer has no
+/// wear figure and says why.
 #[test]
 fn diagnose_judges_each_record_at_its_operating_state() {
     let dir = tmpdir("states");
@@ -494,6 +500,7 @@ fn diagnose_judges_each_record_at_its_operating_state() {
             load,
             "--baseline-manifest",
             m.to_str().unwrap(),
+            "--cached-only",
         ]);
         assert!(ok, "{err}");
         serde_json::from_str::<serde_json::Value>(&out).unwrap()
@@ -513,7 +520,9 @@ fn diagnose_judges_each_record_at_its_operating_state() {
     assert_eq!(v["findings"].as_array().unwrap().len(), 0);
     assert!(v["wear_degree"].is_null());
     assert!(
-        v["warnings"].to_string().contains("precompute"),
+        v["warnings"]
+            .to_string()
+            .contains("covers the records' speeds"),
         "{}",
         v["warnings"]
     );
@@ -562,4 +571,95 @@ fn serve_dashboard_flag_keeps_its_old_name() {
     assert!(!out.contains("\n      --open-dashboard"), "{out}");
     assert!(gearwear(&["serve", "--open-dashboard", "--help"]).0);
     assert!(!gearwear(&["serve", "--no-such-flag", "--help"]).0);
+}
+
+/// `diagnose --gearbox F` without `--table`: a description with no nominal rate gets its table
+/// computed over the speed the record ran at, from the cache on the next run, and extended
+/// (not recomputed) when a record runs outside it.
+#[test]
+fn diagnose_computes_the_table_over_the_records_speeds_and_reuses_it() {
+    let dir = tmpdir("table-cache");
+    let text = std::fs::read_to_string(config("spur-pair.toml")).unwrap();
+    let gb = dir.join("cached-pair.toml");
+    std::fs::write(
+        &gb,
+        text.replace("name = \"spur-pair\"", "name = \"cached-pair\"")
+            .lines()
+            .filter(|l| !l.starts_with("nominal_input_hz"))
+            .collect::<Vec<_>>()
+            .join("\n"),
+    )
+    .unwrap();
+    let gb = gb.to_str().unwrap().to_string();
+    let synth = |hz: &str, name: &str| {
+        let out = dir.join(name);
+        let (ok, _, err) = gearwear(&[
+            "synth",
+            "--gearbox",
+            &gb,
+            "--ea",
+            "0.5",
+            "--input-hz",
+            hz,
+            "--output",
+            out.to_str().unwrap(),
+        ]);
+        assert!(ok, "{err}");
+        out
+    };
+    let diagnose = |rec: &std::path::Path, hz: &str| {
+        let (ok, out, err) = gearwear(&[
+            "diagnose",
+            "--gearbox",
+            &gb,
+            "--input",
+            rec.to_str().unwrap(),
+            "--shaft-hz",
+            hz,
+        ]);
+        assert!(ok, "{err}");
+        (
+            serde_json::from_str::<serde_json::Value>(&out).unwrap(),
+            err,
+        )
+    };
+    let r20 = synth("20", "r20.wav");
+    let (v, err) = diagnose(&r20, "20");
+    assert!(err.contains("simulations"), "computed: {err}");
+    assert!(v["wear_degree"].is_object(), "{v}");
+    assert_eq!(v["gearbox"]["table_status"], "ready", "{v}");
+    let (again, err) = diagnose(&r20, "20");
+    assert!(!err.contains("simulations"), "reused: {err}");
+    assert_eq!(again["wear_degree"], v["wear_degree"]);
+    let r27 = synth("27", "r27.wav");
+    let (v, err) = diagnose(&r27, "27");
+    assert!(err.contains("extending the table"), "{err}");
+    assert!(v["wear_degree"].is_object(), "{v}");
+}
+
+/// The paper's rig by default is the same machine as its description: no `--gearbox` and
+/// `--gearbox configs/gearboxes/wang2019.toml` give the same answer.
+#[test]
+fn the_paper_rig_by_default_is_its_own_description() {
+    let dir = tmpdir("rig-default");
+    let rec = dir.join("rig.wav");
+    let (ok, _, err) = gearwear(&["synth", "--ea", "0.6", "--output", rec.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "diagnose",
+            "--input",
+            rec.to_str().unwrap(),
+            "--shaft-hz",
+            "30",
+        ];
+        args.extend_from_slice(extra);
+        let (ok, out, err) = gearwear(&args);
+        assert!(ok, "{err}");
+        serde_json::from_str::<serde_json::Value>(&out).unwrap()
+    };
+    let plain = run(&[]);
+    let described = run(&["--gearbox", &config("wang2019.toml")]);
+    assert!(plain["wear_degree"].is_object(), "{plain}");
+    assert_eq!(plain, described);
 }

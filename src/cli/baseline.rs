@@ -10,6 +10,7 @@ use anyhow::{Context, Result, bail};
 
 use crate::assessment::{Baselines, Machine, RecordFacts, TachoChannel, baseline_features};
 use crate::condition::Load;
+use crate::diagnosis::machine_path::LineRatios;
 use crate::novelty::RecordFeatures;
 
 /// One healthy record and what is known of its state.
@@ -97,13 +98,14 @@ pub struct Loaded {
 
 /// The machine's baselines from healthy records: `read` loads a file; `facts` gives a file's
 /// facts. Fitted by the core's one fitter, as the service fits a machine's; every channel must
-/// get its baseline (the records were given to be one).
+/// get its baseline (the records were given to be one). Also each channel's records' line
+/// ratios (what the machine's own model is fitted to).
 pub fn fit(
     files: &[BaselineFile],
     machine: &Machine,
     read: &dyn Fn(&Path) -> Result<Loaded>,
     facts: &dyn Fn(&BaselineFile, &Loaded) -> RecordFacts,
-) -> Result<Baselines> {
+) -> Result<(Baselines, BTreeMap<String, Vec<LineRatios>>)> {
     let mut by_channel: BTreeMap<String, Vec<RecordFeatures>> = BTreeMap::new();
     for f in files {
         let mut rec =
@@ -127,5 +129,14 @@ pub fn fit(
             crate::novelty::MIN_BASELINE_RECORDS
         )
     })?;
-    Ok(fitted.with_paths(&by_channel, machine.diagnoser))
+    let ratios = by_channel
+        .iter()
+        .map(|(k, v)| {
+            (
+                k.clone(),
+                v.iter().filter_map(|f| f.ratios.clone()).collect(),
+            )
+        })
+        .collect();
+    Ok((fitted.with_paths(&by_channel, machine.diagnoser), ratios))
 }

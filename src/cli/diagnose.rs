@@ -8,19 +8,25 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 
 use super::baseline::{self, BaselineFile, Loaded};
+use super::cache;
 use super::common::{
     RigArgs, default_table_for, load_gearbox, load_table, parse_range, progress_bar,
 };
 use super::units::UnitArgs;
 use crate::analysis::bifurcation::grid;
+use crate::assessment::condition::measure_record;
 use crate::assessment::{
-    Baselines, GearboxRef, Machine, MachineCalibration, RecordFacts, TableDiagnoser, TachoChannel,
-    Thresholds, assess,
+    Baselines, GearboxRef, Machine, MachineCalibration, OwnModel, RecordFacts, TableDiagnoser,
+    TachoChannel, Thresholds, assess, reads_as_described,
 };
 use crate::condition::Load;
 use crate::diagnosis::DiagnoseOptions;
+use crate::diagnosis::machine_path::LineRatios;
+use crate::diagnosis::machine_physics::MIN_RECORDS as MIN_PHYSICS_RECORDS;
+use crate::gearbox::Gearbox;
 use crate::record::{Column, Format, ReadOptions, read_record, read_record_channels_with_pulses};
 use crate::signal::lines::SEGMENT_PERIODS;
+use crate::signature::coverage::SpeedSpan;
 use crate::signature::precompute::{
     PrecomputeSpec, default_grid, paper_grid, partial_path, precompute,
 };
@@ -130,11 +136,25 @@ pub struct DiagnoseArgs {
     /// `GET /v1/machines/{id}/baseline` shows it under `channels.*.model`.
     #[arg(long, value_name = "FILE")]
     pub model_report: Option<PathBuf>,
+    /// Write the machine's own model fitted to the baseline (its physics factors with their
+    /// intervals, the fit per speed and line family, the left-out error against the empirical
+    /// calibration's) here, or why it was refused (JSON).
+    #[arg(long, value_name = "FILE")]
+    pub physics_report: Option<PathBuf>,
+    /// Compute nothing: use a cached or committed table and own model only (without one that
+    /// covers the record, it is judged against its baseline alone).
+    #[arg(long)]
+    pub cached_only: bool,
+    /// Read the wear through the machine's calibrated transfer path alone, without fitting its
+    /// physics to the baseline.
+    #[arg(long)]
+    pub no_own_model: bool,
     /// File format (default: from the extension).
     #[arg(long, value_enum)]
     pub format: Option<FormatArg>,
-    /// Signature table (default: the committed `signatures/model_a_accel.json` for the paper's
-    /// rig, `signatures/<name>.json` for a described gearbox).
+    /// Signature table (default: the gearbox's table over the speeds the records ran at, from
+    /// the cache — computed or extended when none covers them — starting from the committed
+    /// `signatures/` table when there is one).
     #[arg(long)]
     pub table: Option<PathBuf>,
     /// Credible level of the wear interval.
@@ -286,26 +306,24 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
         column: None,
     };
     let calibration = a.calibration.as_deref().map(read_calibration).transpose()?;
-    let (diagnoser, table_note) = table_for(&a)?;
-    let described = match (&diagnoser, &a.gearbox) {
-        (None, Some(p)) => Some(load_gearbox(Some(p))?),
-        _ => None,
-    };
-    let gearbox = match (&diagnoser, &described) {
-        (Some(d), _) => d.table().gearbox(),
-        (None, Some(gb)) => gb,
-        (None, None) => bail!("give --gearbox or --table"),
-    };
     let load = a.load.as_deref().and_then(Load::parse);
+    // Baseline files first: a wrong one should fail before anything is computed.
+    let files = baseline_files(&a, &load)?;
+    let mut rec = load_record(&a.input, &a, &opts)?;
+    let gearbox = match (&a.table, &a.gearbox) {
+        (Some(t), None) => load_table(None, Some(t), a.allow_stale)?.gearbox().clone(),
+        (_, g) => load_gearbox(g.as_deref())?,
+    };
+    let (diagnoser, table_note) = table_for(&a, &gearbox, &files, &rec, &opts, &load)?;
     let no_baseline = BTreeMap::new();
     let no_states = BTreeMap::new();
     let no_counts = BTreeMap::new();
     let no_paths = BTreeMap::new();
     let mut machine = Machine {
-        gearbox,
-        gearbox_ref: gearbox_ref(&a, gearbox, diagnoser.is_some()),
-        // Order tracking needs the gearbox's tooth counts: only with a description.
-        described: a.gearbox.is_some(),
+        gearbox: &gearbox,
+        gearbox_ref: gearbox_ref(&a, &gearbox, diagnoser.is_some()),
+        // The paper's rig by default reads as with `--gearbox configs/gearboxes/wang2019.toml`.
+        described: reads_as_described(&gearbox, rec.tacho.is_some()),
         diagnoser: diagnoser.as_ref(),
         table_note,
         input_shaft_hz: None,
@@ -322,10 +340,8 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
         },
         units: Default::default(),
     };
-    // Baseline first: a wrong baseline file should fail before the diagnosis runs.
-    let files = baseline_files(&a, &load)?;
-    let fitted = if files.is_empty() {
-        Baselines::default()
+    let (fitted, ratios) = if files.is_empty() {
+        (Baselines::default(), BTreeMap::new())
     } else {
         baseline::fit(
             &files,
@@ -334,6 +350,8 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
             &|f, rec| facts_of(rec, f.shaft_hz.or(a.shaft_hz), f.load.clone(), true),
         )?
     };
+    let own = own_model_for(&a, &gearbox, diagnoser.as_ref(), &ratios)?;
+    machine.own_model = own.as_ref();
     if let Some(path) = &a.model_report {
         write_model_report(path, &fitted)?;
     }
@@ -341,7 +359,6 @@ pub fn diagnose_cmd(a: DiagnoseArgs) -> Result<()> {
     machine.state_baselines = &fitted.states;
     machine.paths = &fitted.paths;
     machine.baseline_counts = &fitted.counts;
-    let mut rec = load_record(&a.input, &a, &opts)?;
     let names: Vec<String> = rec
         .chosen
         .iter()
@@ -405,38 +422,107 @@ fn gearbox_ref(a: &DiagnoseArgs, gearbox: &crate::gearbox::Gearbox, table: bool)
     }
 }
 
-/// The signature table's diagnoser, or — for a described gearbox whose default table does
-/// not exist yet, with a baseline to judge the record — none, with the note that says why
-/// there is no wear figure and how to get one.
-fn table_for(a: &DiagnoseArgs) -> Result<(Option<TableDiagnoser>, Option<String>)> {
-    let table = match load_table(a.gearbox.as_deref(), a.table.as_deref(), a.allow_stale) {
-        Ok(t) => t,
-        Err(e) => {
-            let baseline = !a.baseline.is_empty() || a.baseline_manifest.is_some();
-            let Some(g) = a
-                .gearbox
-                .as_deref()
-                .filter(|_| a.table.is_none() && baseline)
-            else {
-                return Err(e);
-            };
-            let note = format!(
-                "no wear figure: {e:#}; the record is judged against its baseline only (make \
-                 the table with `gearwear precompute --gearbox {} --input-hz LO:HI:STEP` over \
-                 the machine's speeds)",
-                g.display()
-            );
-            return Ok((None, Some(note)));
-        }
+/// The signature table's diagnoser: `--table`, else the gearbox's table over the speeds the
+/// baseline and the record ran at, from the cache (computed or extended as needed; with
+/// `--cached-only` only what is there). Without one — the speeds would need more simulations
+/// than a table may take, or nothing cached covers them — and with a baseline to judge the
+/// record: none, with the note that says why there is no wear figure.
+fn table_for(
+    a: &DiagnoseArgs,
+    gb: &Gearbox,
+    files: &[BaselineFile],
+    rec: &Loaded,
+    opts: &ReadOptions,
+    load: &Option<Load>,
+) -> Result<(Option<TableDiagnoser>, Option<String>)> {
+    let baseline = !files.is_empty();
+    let diagnose_opts = DiagnoseOptions {
+        credible_level: a.level,
+        ..Default::default()
     };
-    let diagnoser = TableDiagnoser::new(
-        table,
-        DiagnoseOptions {
-            credible_level: a.level,
-            ..Default::default()
-        },
-    )?;
-    Ok((Some(diagnoser), None))
+    if a.table.is_some() {
+        let t = load_table(a.gearbox.as_deref(), a.table.as_deref(), a.allow_stale)?;
+        return Ok((Some(TableDiagnoser::new(t, diagnose_opts)?), None));
+    }
+    let spans = record_spans(a, gb, files, rec, opts, load);
+    let table = if a.cached_only {
+        cache::cached_table(gb, &spans).ok_or_else(|| {
+            anyhow::anyhow!(
+                "no cached or committed table of `{}` covers the records' speeds (--cached-only)",
+                gb.name()
+            )
+        })
+    } else {
+        cache::table_for(gb, &spans)
+    };
+    match table {
+        Ok(t) => Ok((Some(TableDiagnoser::new(t, diagnose_opts)?), None)),
+        Err(e) if baseline => Ok((
+            None,
+            Some(format!(
+                "no wear figure: {e:#}; the record is judged against its baseline only"
+            )),
+        )),
+        Err(e) => Err(e),
+    }
+}
+
+/// The spans of input-shaft rates the table must cover: each baseline record's and the
+/// record's measured rate (tachometer, else tacho-less around its declared rate), else its
+/// declared rate's span; none for a record whose rate is neither measured nor declared.
+fn record_spans(
+    a: &DiagnoseArgs,
+    gb: &Gearbox,
+    files: &[BaselineFile],
+    rec: &Loaded,
+    opts: &ReadOptions,
+    load: &Option<Load>,
+) -> Vec<SpeedSpan> {
+    let empty = Baselines::default();
+    let m = Machine::described("cli", gb, None, &empty);
+    let span = |l: &Loaded, hz: Option<f64>, ld: Option<Load>| -> Option<SpeedSpan> {
+        let facts = facts_of(l, hz, ld, false);
+        measure_record(&l.channels, &l.chosen, &facts, &m)
+            .ok()
+            .and_then(|s| s.state)
+            .map(|s| SpeedSpan::measured(s.shaft_hz))
+            .or(hz.map(SpeedSpan::configured))
+    };
+    let mut spans: Vec<SpeedSpan> = files
+        .iter()
+        .filter_map(|f| {
+            let l = load_record(&f.path, a, opts).ok()?;
+            span(&l, f.shaft_hz.or(a.shaft_hz), f.load.clone())
+        })
+        .collect();
+    spans.extend(span(rec, a.shaft_hz, load.clone()));
+    spans
+}
+
+/// The machine's own model from the baseline's line ratios (none with `--no-own-model`,
+/// without a table, or when the fit is refused — said on stderr and in `--physics-report`).
+fn own_model_for(
+    a: &DiagnoseArgs,
+    gb: &Gearbox,
+    diagnoser: Option<&TableDiagnoser>,
+    ratios: &BTreeMap<String, Vec<LineRatios>>,
+) -> Result<Option<OwnModel>> {
+    let Some(d) = diagnoser.filter(|_| !a.no_own_model) else {
+        return Ok(None);
+    };
+    let enough = ratios.values().any(|r| r.len() >= MIN_PHYSICS_RECORDS);
+    if !enough {
+        return Ok(None);
+    }
+    let (fit, model) = cache::own_model(gb, d.table(), &d.options(None), ratios, !a.cached_only)?;
+    if let Some(path) = &a.physics_report {
+        std::fs::write(path, serde_json::to_string_pretty(&fit)?)
+            .with_context(|| format!("writing the physics report {}", path.display()))?;
+    }
+    if let cache::CachedFit::Refused { reason } = &fit {
+        eprintln!("the machine's own model is not used: {reason}");
+    }
+    Ok(model)
 }
 
 fn facts_of(rec: &Loaded, shaft_hz: Option<f64>, load: Option<Load>, healthy: bool) -> RecordFacts {

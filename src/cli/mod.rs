@@ -13,6 +13,7 @@ use clap::{Parser, Subcommand};
 
 pub mod alerts;
 pub mod baseline;
+pub mod cache;
 pub mod calibrate;
 pub mod common;
 pub mod diagnose;

@@ -16,6 +16,11 @@ use tokio::sync::oneshot;
 pub fn gearwear_bin() -> std::process::Command {
     let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_gearwear"));
     c.current_dir(env!("CARGO_MANIFEST_DIR"));
+    // The CLI's table and model cache: this test run's own, not the user's.
+    c.env(
+        "GEARWEAR_CACHE_DIR",
+        std::env::temp_dir().join(format!("gearwear-api-cache-{}", std::process::id())),
+    );
     c
 }
 

@@ -9,7 +9,7 @@ use super::idempotency::Idempotency;
 use super::rows::{Ids, answer, diagnosis_row, event_extras, measured_at, record_row};
 use crate::assessment::{
     Assessment, Baselines, Machine, MachineCalibration, RecordFacts, TableDiagnoser, TachoChannel,
-    Thresholds, assess,
+    Thresholds, assess, reads_as_described,
 };
 use crate::gearbox::Gearbox;
 use crate::service::AppState;
@@ -324,7 +324,7 @@ impl AssessJob {
         let machine = Machine {
             gearbox: &ctx.gearbox,
             gearbox_ref: ctx.gearbox_ref(),
-            described: ctx.machine.as_ref().is_some_and(|m| m.gearbox_id.is_some()),
+            described: reads_as_described(&ctx.gearbox, self.tacho.is_some()),
             diagnoser,
             table_note: ctx.table_note(),
             input_shaft_hz: ctx.input_shaft_hz(),

@@ -101,6 +101,17 @@ pub struct Machine<'a> {
     pub units: MachineUnits,
 }
 
+/// Whether a record of `gearbox` is read as a described machine's (its shafts tracked, its
+/// operating state measured and its parts' evidence taken; [`Machine::described`]): always,
+/// except for the first paper's rig without a tachometer. Its records carry no line of the
+/// input shaft of their own, so the tacho-less tracking and the set-up check, which follow
+/// those lines, misread them; with a tachometer the angle is counted. The rule is the same for
+/// the rig whether it is the default or named (`--gearbox configs/gearboxes/wang2019.toml`, a
+/// machine of gearbox `wang2019`), so both read a record alike.
+pub fn reads_as_described(gearbox: &Gearbox, tachometer: bool) -> bool {
+    tachometer || gearbox.hash != Gearbox::paper_rig().hash
+}
+
 impl<'a> Machine<'a> {
     /// A machine with a described gearbox whose table is ready (`diagnoser`), judged against
     /// `baselines` (pooled, state-aware and paths), with the default thresholds, no closed-loop

@@ -246,6 +246,7 @@ impl MachinePhysics {
             states: report.states(),
             in_sample_db: rms_db(&errors(&full.terms)),
             left_out_db,
+            left_out_median_db: median_abs_db(&errors(&left_out)),
             yardstick_db: yardstick.is_finite().then_some(yardstick),
             plain_db: rms_db(&plain),
             sensitivity: sensitivity(&data, &full.terms, &jac),

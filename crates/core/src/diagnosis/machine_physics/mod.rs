@@ -178,6 +178,8 @@ pub struct MachinePhysics {
     /// Over every speed and family, mesh lines and their combinations: RMS dB.
     pub in_sample_db: f64,
     pub left_out_db: f64,
+    /// The median |error| of the left-out lines (dB).
+    pub left_out_median_db: f64,
     /// The same records' left-out error under the empirical calibration (the description's
     /// physics, a path alone): the yardstick (dB). `None` when it could not be fitted.
     pub yardstick_db: Option<f64>,
@@ -265,6 +267,17 @@ fn family(name: &str) -> String {
     }
     meshes.sort();
     meshes.join("×")
+}
+
+fn median_abs_db(e: &[f64]) -> f64 {
+    let mut v: Vec<f64> = e
+        .iter()
+        .map(|x| x.abs() * 20.0 / std::f64::consts::LN_10)
+        .collect();
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    crate::signal::median(&mut v)
 }
 
 fn rms_db(e: &[f64]) -> f64 {
