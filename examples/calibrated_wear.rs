@@ -360,7 +360,7 @@ fn own_model(gb: &Gearbox, table: &SignatureTable, ratios: &[LineRatios]) -> Opt
     let spec = physics.table_spec(gb, table).expect("the own table's spec");
     let own = precompute(&spec, None, &|| {}).expect("the own table");
     let diagnoser = TableDiagnoser::new(own, opts).expect("the own table");
-    Some(OwnModel { physics, diagnoser })
+    Some(OwnModel::new(physics, diagnoser))
 }
 
 /// Every judged record's truth and its readings, a Markdown table.

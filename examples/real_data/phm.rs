@@ -13,16 +13,20 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use gearwear::assessment::OwnModel;
 use gearwear::assessment::{
     Assessment, Baselines, Machine, RecordFacts, TableDiagnoser, TachoChannel, assess,
     baseline_features,
 };
 use gearwear::condition::Load;
 use gearwear::diagnosis::DiagnoseOptions;
+use gearwear::diagnosis::machine_path::LineRatios;
+use gearwear::diagnosis::machine_physics::{MachinePhysics, PhysicsFitOptions};
 use gearwear::gearbox::Gearbox;
 use gearwear::novelty::RecordFeatures;
 use gearwear::record::{ReadOptions, read_record_channels};
 use gearwear::signature::SignatureTable;
+use gearwear::signature::precompute::precompute;
 use rayon::prelude::*;
 
 pub const FS: f64 = 200_000.0 / 3.0;
@@ -379,7 +383,7 @@ fn fit_baseline(
     gb: &Gearbox,
     diagnoser: Option<&TableDiagnoser>,
     tacho: bool,
-) -> (Baselines, f64) {
+) -> (Baselines, BTreeMap<String, Vec<LineRatios>>, f64) {
     let base_files: Vec<&File> = all.iter().filter(|f| f.case == 1 && f.run == 1).collect();
     let empty = Default::default();
     let m0 = machine(t, gb, diagnoser, &empty);
@@ -401,7 +405,58 @@ fn fit_baseline(
         .require_all()
         .expect("baseline")
         .with_paths(&by_channel, diagnoser);
-    (b, t0.elapsed().as_secs_f64())
+    let ratios = by_channel
+        .iter()
+        .map(|(k, v)| {
+            (
+                k.clone(),
+                v.iter().filter_map(|f| f.ratios.clone()).collect(),
+            )
+        })
+        .collect();
+    (b, ratios, t0.elapsed().as_secs_f64())
+}
+
+/// The machine's own model fitted to the baseline's line ratios (`PHM_OWN_MODEL=1`), with its
+/// own table and its gears' fault signatures; `None` otherwise or when refused (said).
+fn own_model(
+    gb: &Gearbox,
+    diagnoser: Option<&TableDiagnoser>,
+    ratios: &BTreeMap<String, Vec<LineRatios>>,
+) -> Option<OwnModel> {
+    if std::env::var("PHM_OWN_MODEL").map_or(true, |v| v == "0") {
+        return None;
+    }
+    let d = diagnoser?;
+    let t0 = Instant::now();
+    let fit = MachinePhysics::fit(
+        gb,
+        d.table(),
+        &d.options(None),
+        ratios,
+        &PhysicsFitOptions::default(),
+    );
+    let physics = match fit {
+        Ok(p) => p,
+        Err(e) => {
+            println!("the machine's own model: refused ({e})\n");
+            return None;
+        }
+    };
+    let spec = physics.table_spec(gb, d.table()).ok()?;
+    let own = precompute(&spec, None, &|| {}).ok()?;
+    let model = OwnModel::new(physics, TableDiagnoser::new(own, d.options(None)).ok()?);
+    println!(
+        "the machine's own model: fitted with its table and its gears' signatures in {:.0} s \
+         (a left-out speed's lines to {:.2} dB against {} dB for the empirical path)\n",
+        t0.elapsed().as_secs_f64(),
+        model.physics.left_out_db,
+        model
+            .physics
+            .yardstick_db
+            .map_or("–".into(), |y| format!("{y:.2}"))
+    );
+    Some(model)
 }
 
 /// Run one mode (with or without the tachometer): print its rows, per case and per load, and
@@ -414,8 +469,10 @@ fn run_mode(
     tacho: bool,
 ) -> (String, String) {
     let mode = if tacho { "tachometer" } else { "tacho-less" };
-    let (baselines, baseline_s) = fit_baseline(t, all, gb, diagnoser, tacho);
-    let m = machine(t, gb, diagnoser, &baselines);
+    let (baselines, ratios, baseline_s) = fit_baseline(t, all, gb, diagnoser, tacho);
+    let own = own_model(gb, diagnoser, &ratios);
+    let mut m = machine(t, gb, diagnoser, &baselines);
+    m.own_model = own.as_ref();
     let judged: Vec<&File> = all
         .iter()
         .filter(|f| !(f.case == 1 && f.run == 1))

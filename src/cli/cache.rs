@@ -248,9 +248,6 @@ pub fn own_model(
         _ => stored(&own_path, &compute(&spec, "the machine's own table")?)?,
     };
     let diagnoser = TableDiagnoser::new(own, opts.clone())?;
-    let model = OwnModel {
-        physics: (**physics).clone(),
-        diagnoser,
-    };
+    let model = OwnModel::new((**physics).clone(), diagnoser);
     Ok((fit, Some(model)))
 }

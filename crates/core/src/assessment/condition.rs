@@ -181,6 +181,7 @@ pub fn judge(
     baseline: &StateBaseline,
     features: &RecordFeatures,
     m: &Measured,
+    response: Option<&crate::condition::candidates::Response>,
 ) -> Option<std::result::Result<Judged, String>> {
     let state = features.state.as_ref()?;
     let parts = m.parts.as_ref()?;
@@ -188,7 +189,7 @@ pub fn judge(
         return None;
     }
     Some(baseline.score(state, &features.evidence).map(|s| Judged {
-        findings: findings(&s, parts, None),
+        findings: findings(&s, parts, response),
         novelty: novelty_of(&s, baseline),
         judgement: judgement_of(&s),
     }))

@@ -494,10 +494,10 @@ fn assess_channel(
     stage("diagnosis");
     let mut features = channel_features(rec, facts, machine, measured, reading.as_ref(), at_angle)?;
     features.ratios = reading.as_ref().and_then(|r| r.ratios.clone());
-    let judged = machine
-        .state_baselines
-        .get(&name)
-        .and_then(|b| condition::judge(b, &features, measured));
+    let judged = machine.state_baselines.get(&name).and_then(|b| {
+        let response = machine.own_model.and_then(|m| m.response.as_ref());
+        condition::judge(b, &features, measured, response)
+    });
     let (novelty, state, findings, uncovered) = match judged {
         Some(Ok(j)) => (Some(j.novelty), Some(j.judgement), j.findings, None),
         Some(Err(missing)) => (None, None, Vec::new(), Some(missing)),

@@ -25,6 +25,7 @@ pub(crate) mod marked;
 pub mod measured_loop;
 pub mod parts;
 pub mod plot;
+pub mod response;
 pub mod setup;
 pub mod state;
 pub mod synchronous;

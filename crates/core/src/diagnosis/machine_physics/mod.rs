@@ -180,6 +180,11 @@ pub struct MachinePhysics {
     pub left_out_db: f64,
     /// The median |error| of the left-out lines (dB).
     pub left_out_median_db: f64,
+    /// Most left-out error (RMS dB) at which the model reads wear: three times the
+    /// diagnosis's measurement floor per feature. Above it the model misses a healthy speed's
+    /// lines by far more than the records' own scatter: every reading against it is withheld
+    /// (`poor-fit`).
+    pub predictive_limit_db: f64,
     /// The same records' left-out error under the empirical calibration (the description's
     /// physics, a path alone): the yardstick (dB). `None` when it could not be fitted.
     pub yardstick_db: Option<f64>,

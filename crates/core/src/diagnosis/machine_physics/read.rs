@@ -17,6 +17,7 @@ impl MachinePhysics {
     /// path's scatter and the factors' uncertainty ([`MachinePhysics::shift_at`]), and the
     /// interval widened by the wear stages' common error factor's uncertainty
     /// ([`MachinePhysics::wear_scale_sigma`], in quadrature on `ln ea`). The figure is withheld
+    /// (`poor-fit`) when the model is not predictive ([`MachinePhysics::predictive`]),
     /// (`outside-calibration`) at a speed the fit did not cover, and (`poor-fit`) where the
     /// machine's own model does not fit the record. `None` for a channel the fit did not see.
     pub fn reread(
@@ -29,6 +30,20 @@ impl MachinePhysics {
     ) -> Result<Option<Diagnosis>> {
         if !self.channels.contains_key(channel) {
             return Ok(None);
+        }
+        if !self.predictive() {
+            let mut d = plain.clone();
+            d.withhold(
+                WithheldReason::PoorFit,
+                format!(
+                    "no wear figure: the machine's own model misses its healthy records' lines at a \
+                     left-out speed by {:.1} dB (RMS), more than the {:.1} dB it may: its physics \
+                     are not this machine's, and a wear degree read against them would not be \
+                     either",
+                    self.left_out_db, self.predictive_limit_db
+                ),
+            );
+            return Ok(Some(d));
         }
         if !self.covers(plain.f1_hz) {
             let mut d = plain.clone();
