@@ -40,6 +40,7 @@ pub mod read;
 pub mod records;
 pub mod signatures;
 pub mod spectrum;
+pub mod tables;
 pub mod trend;
 pub mod units;
 pub mod webhooks;
@@ -318,7 +319,7 @@ pub async fn serve(
     }
     let (stop_tx, stop_rx) = watch::channel(false);
     let worker = tokio::spawn(webhooks::worker(state.clone(), stop_rx.clone()));
-    let jobs = tokio::spawn(gearboxes::worker(state.clone(), stop_rx.clone()));
+    let jobs = tokio::spawn(tables::jobs::worker(state.clone(), stop_rx.clone()));
     let mqtt = state
         .settings
         .mqtt

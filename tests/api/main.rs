@@ -23,6 +23,7 @@ mod quality_battery;
 mod record_page;
 mod security;
 mod store;
+mod tables;
 mod trend;
 mod units;
 mod webhooks;

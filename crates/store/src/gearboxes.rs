@@ -33,6 +33,35 @@ pub struct GearboxRow {
     pub updated_at: i64,
     pub started_at: Option<i64>,
     pub finished_at: Option<i64>,
+    /// The Ω1 columns of the stored table (`None` while none is stored, and for the built-in
+    /// rig, whose table is the served file).
+    pub table_columns: Option<Vec<f64>>,
+    /// An extension of the ready table to more columns, when one is pending (or failed).
+    pub extension: Option<Extension>,
+}
+
+/// A pending extension of a ready table ([`crate::TableExtensionStore`]): a job of its own
+/// beside the table, which stays ready and in use meanwhile.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Extension {
+    /// `queued`, `running` or `failed`.
+    pub status: TableStatus,
+    /// 0–1 while running.
+    pub progress: f64,
+    pub error: Option<String>,
+    pub claimed_by: Option<String>,
+    pub lease_until: i64,
+    pub attempts: i64,
+    /// The columns it computes towards (set when it is claimed).
+    pub columns: Option<Vec<f64>>,
+    pub queued_at: Option<i64>,
+}
+
+/// A computed table as stored: its JSON and its Ω1 columns.
+#[derive(Debug, Clone)]
+pub struct TableText {
+    pub json: String,
+    pub columns: Vec<f64>,
 }
 
 impl GearboxRow {
@@ -72,6 +101,8 @@ impl GearboxRow {
             updated_at: now,
             started_at: None,
             finished_at: None,
+            table_columns: None,
+            extension: None,
         };
         Ok((row, gb))
     }
@@ -119,14 +150,14 @@ pub trait GearboxStore: Send + Sync {
         lease_until: i64,
         now: i64,
     ) -> StoreResult<bool>;
-    /// Finish a claimed job: `Ok(table JSON)` → `ready`, `Err(reason)` → `failed`. `false`
+    /// Finish a claimed job: `Ok(table)` → `ready`, `Err(reason)` → `failed`. `false`
     /// when `worker` no longer holds it (nothing is written).
     async fn finish_gearbox_job(
         &self,
         id: &str,
         hash: &str,
         worker: &str,
-        result: Result<String, String>,
+        result: Result<TableText, String>,
         now: i64,
     ) -> StoreResult<bool>;
     /// Give a claimed job back (the replica is stopping): queued again at once, for any
@@ -144,11 +175,40 @@ macro_rules! gearboxes_sql {
         use $crate::gearboxes::TableStatus;
         use $crate::*;
 
-        const GEARBOX_COLS: &str = "id, name, source, source_format, description, hash, builtin, \
-            status, progress, error, claimed_by, lease_until, attempts, created_at, updated_at, \
-            started_at, finished_at";
+        pub(crate) const GEARBOX_COLS: &str = "id, name, source, source_format, description, \
+            hash, builtin, status, progress, error, claimed_by, lease_until, attempts, \
+            created_at, updated_at, started_at, finished_at, table_columns, extension_status, \
+            extension_progress, extension_error, extension_claimed_by, extension_lease_until, \
+            extension_attempts, extension_columns, extension_queued_at";
 
-        fn gearbox_row(r: &<$db as sqlx::Database>::Row) -> StoreResult<GearboxRow> {
+        fn status(text: String) -> StoreResult<TableStatus> {
+            text.parse()
+                .map_err(|e: gearwear_core::words::UnknownWord| StoreError::Decode(e.to_string()))
+        }
+
+        /// A JSON array of columns as stored.
+        fn columns(text: Option<String>) -> StoreResult<Option<Vec<f64>>> {
+            text.map(|t| {
+                serde_json::from_str(&t)
+                    .map_err(|e| StoreError::Decode(format!("table columns: {e}")))
+            })
+            .transpose()
+        }
+
+        pub(crate) fn gearbox_row(r: &<$db as sqlx::Database>::Row) -> StoreResult<GearboxRow> {
+            let extension = match r.try_get::<Option<String>, _>("extension_status")? {
+                None => None,
+                Some(s) => Some($crate::gearboxes::Extension {
+                    status: status(s)?,
+                    progress: r.try_get("extension_progress")?,
+                    error: r.try_get("extension_error")?,
+                    claimed_by: r.try_get("extension_claimed_by")?,
+                    lease_until: r.try_get("extension_lease_until")?,
+                    attempts: r.try_get("extension_attempts")?,
+                    columns: columns(r.try_get("extension_columns")?)?,
+                    queued_at: r.try_get("extension_queued_at")?,
+                }),
+            };
             Ok(GearboxRow {
                 id: r.try_get("id")?,
                 name: r.try_get("name")?,
@@ -157,12 +217,7 @@ macro_rules! gearboxes_sql {
                 description: r.try_get("description")?,
                 hash: r.try_get("hash")?,
                 builtin: r.try_get::<i64, _>("builtin")? != 0,
-                status: r
-                    .try_get::<String, _>("status")?
-                    .parse()
-                    .map_err(|e: gearwear_core::words::UnknownWord| {
-                        StoreError::Decode(e.to_string())
-                    })?,
+                status: status(r.try_get("status")?)?,
                 progress: r.try_get("progress")?,
                 error: r.try_get("error")?,
                 claimed_by: r.try_get("claimed_by")?,
@@ -172,6 +227,8 @@ macro_rules! gearboxes_sql {
                 updated_at: r.try_get("updated_at")?,
                 started_at: r.try_get("started_at")?,
                 finished_at: r.try_get("finished_at")?,
+                table_columns: columns(r.try_get("table_columns")?)?,
+                extension,
             })
         }
 
@@ -203,7 +260,12 @@ macro_rules! gearboxes_sql {
                          description = $5, hash = $6, status = 'queued', progress = 0, \
                          error = NULL, claimed_by = NULL, lease_until = 0, attempts = 0, \
                          signature_table = NULL, updated_at = $7, started_at = NULL, \
-                         finished_at = NULL WHERE id = $1 AND hash <> $6 AND builtin = 0",
+                         finished_at = NULL, table_columns = NULL, extension_status = NULL, \
+                         extension_progress = 0, extension_error = NULL, \
+                         extension_claimed_by = NULL, extension_lease_until = 0, \
+                         extension_attempts = 0, extension_columns = NULL, \
+                         extension_queued_at = NULL \
+                         WHERE id = $1 AND hash <> $6 AND builtin = 0",
                     )
                     .bind(&g.id)
                     .bind(&g.name)
@@ -215,6 +277,12 @@ macro_rules! gearboxes_sql {
                     .execute(&mut *tx)
                     .await?;
                     if upd.rows_affected() == 1 {
+                        // The speeds measured against the old description go with it.
+                        sqlx::query("DELETE FROM table_speeds WHERE gearbox_id = $1 AND hash <> $2")
+                            .bind(&g.id)
+                            .bind(&g.hash)
+                            .execute(&mut *tx)
+                            .await?;
                         PutOutcome::Replaced
                     } else {
                         let builtin: i64 =
@@ -370,16 +438,23 @@ macro_rules! gearboxes_sql {
                 id: &str,
                 hash: &str,
                 worker: &str,
-                result: Result<String, String>,
+                result: Result<TableText, String>,
                 now: i64,
             ) -> StoreResult<bool> {
-                let (status, table, error, progress) = match result {
-                    Ok(t) => (TableStatus::Ready, Some(t), None, 1.0),
-                    Err(e) => (TableStatus::Failed, None, Some(e), 0.0),
+                let (status, table, cols, error, progress) = match result {
+                    Ok(t) => (
+                        TableStatus::Ready,
+                        Some(t.json),
+                        Some(serde_json::to_string(&t.columns).unwrap_or_default()),
+                        None,
+                        1.0,
+                    ),
+                    Err(e) => (TableStatus::Failed, None, None, Some(e), 0.0),
                 };
                 let r = sqlx::query(
                     "UPDATE gearboxes SET status = $4, signature_table = $5, error = $6, \
-                     progress = $7, finished_at = $8, updated_at = $8, lease_until = 0 \
+                     progress = $7, finished_at = $8, updated_at = $8, lease_until = 0, \
+                     table_columns = $9 \
                      WHERE id = $1 AND hash = $2 AND claimed_by = $3 AND status = 'running'",
                 )
                 .bind(id)
@@ -390,6 +465,7 @@ macro_rules! gearboxes_sql {
                 .bind(error)
                 .bind(progress)
                 .bind(now)
+                .bind(cols)
                 .execute(&self.pool)
                 .await?;
                 Ok(r.rows_affected() == 1)
