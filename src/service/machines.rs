@@ -236,11 +236,15 @@ pub async fn baselines(
         return Ok(b);
     }
     let per = baseline_features(app, &m.id, hash).await?;
-    let fitted = tokio::task::spawn_blocking(move || {
-        Baselines::fit(&per).with_paths(&per, diagnoser.as_deref())
+    let table_ready = diagnoser.is_some();
+    let (fitted, per) = tokio::task::spawn_blocking(move || {
+        let b = Baselines::fit(&per).with_paths(&per, diagnoser.as_deref());
+        (b, per)
     })
     .await
     .map_err(|e| ApiError::internal(format!("fitting the baseline failed: {e}")))?;
+    // A baseline that changed may now be enough for the machine's own model.
+    super::physics::queue_if_fittable(app, m, hash, &per, table_ready).await;
     for (channel, e) in &fitted.unfitted {
         tracing::warn!(machine = %m.id, channel = %channel, error = %e, "a baseline could not be fitted");
     }
@@ -528,7 +532,15 @@ pub async fn baseline_json(app: &AppState, m: &MachineRow) -> ApiResult<Value> {
             )
         })
         .collect();
+    let physics = match &row {
+        Some(r) => {
+            let stored = app.store.get_machine_physics(&m.id).await?;
+            super::physics::physics_json(stored.as_ref(), &super::physics::key_of(m, &r.hash))
+        }
+        None => Value::Null,
+    };
     Ok(json!({
+        "physics": physics,
         "records": records,
         "count": rows.len(),
         "min_records": MIN_BASELINE_RECORDS,

@@ -18,6 +18,7 @@ mod machine_page;
 mod mqtt;
 mod openapi;
 mod operating_state;
+mod own_model;
 mod planner;
 mod quality_battery;
 mod record_page;

@@ -10,8 +10,8 @@ use serde::{Deserialize, Serialize};
 use super::idempotency::Idempotency;
 use super::rows::{Ids, answer, diagnosis_row, event_extras, measured_at, record_row};
 use crate::assessment::{
-    Assessment, Baselines, Machine, MachineCalibration, RecordFacts, TableDiagnoser, TachoChannel,
-    Thresholds, assess,
+    Assessment, Baselines, Machine, MachineCalibration, OwnModel, RecordFacts, TableDiagnoser,
+    TachoChannel, Thresholds, assess,
 };
 use crate::condition::Load;
 use crate::diagnosis::WithheldReason;
@@ -327,6 +327,8 @@ pub(super) struct AssessJob {
     tacho: Option<TachoChannel>,
     /// The machine's declared units and ISO class.
     units: MachineUnits,
+    /// The machine's own model, when one is ready for its baseline.
+    own: Option<Arc<OwnModel>>,
 }
 
 /// What [`AssessJob::run`] gives back: the record, its assessment, the spectrum plot, the
@@ -383,7 +385,15 @@ impl RecordRequest {
             .get_calibration(machine_id)
             .await?
             .map(|c| calibration_of(&c));
+        let own = match ctx.diagnoser {
+            Some(_) => {
+                crate::service::physics::own_model(app, ctx.machine.as_ref(), &ctx.gearbox_row.hash)
+                    .await?
+            }
+            None => None,
+        };
         Ok(AssessJob {
+            own,
             dec,
             chosen,
             ctx,
@@ -423,7 +433,7 @@ impl AssessJob {
             baseline_counts: &self.baselines.counts,
             calibration: self.calibration.as_ref(),
             paths: &self.baselines.paths,
-            own_model: None,
+            own_model: self.own.as_deref(),
             // A described gearbox's table is extended to the speeds its records run at (the
             // built-in rig's is the served file).
             extends_tables: !ctx.gearbox_row.builtin,

@@ -42,6 +42,7 @@ pub(crate) fn worker_id() -> String {
 pub(crate) enum LeaseOf {
     Table { id: String, hash: String },
     Extension { id: String, hash: String },
+    Physics { machine_id: String },
 }
 
 impl LeaseOf {
@@ -60,6 +61,11 @@ impl LeaseOf {
                     .extension_progress(id, hash, me, progress, None, until, now)
                     .await
             }
+            LeaseOf::Physics { machine_id } => {
+                app.store
+                    .machine_physics_progress(machine_id, me, progress, None, until, now)
+                    .await
+            }
         }
     }
 
@@ -68,6 +74,9 @@ impl LeaseOf {
         let _ = match self {
             LeaseOf::Table { id, hash } => app.store.release_gearbox_job(id, hash, me).await,
             LeaseOf::Extension { id, hash } => app.store.release_extension(id, hash, me).await,
+            LeaseOf::Physics { machine_id } => {
+                app.store.release_machine_physics(machine_id, me).await
+            }
         };
     }
 }
