@@ -192,7 +192,7 @@ pub async fn put(
             ),
         ));
     }
-    let (row, gb) = GearboxRow::described(&id, text, format, "request body").map_err(|e| {
+    let (mut row, gb) = GearboxRow::described(&id, text, format, "request body").map_err(|e| {
         ApiError::unprocessable(
             "invalid-gearbox",
             "Invalid gearbox description",
@@ -200,6 +200,11 @@ pub async fn put(
         )
         .with("gearbox_id", id.as_str())
     })?;
+    if gb.description.nominal_input_hz.is_none() {
+        // Without a nominal rate the table has nowhere to go but its machines' speeds: its job
+        // waits a moment for a machine to be configured (which makes it due at once).
+        row.lease_until = crate::store::now_ms() + super::tables::WAIT_FOR_MACHINES_MS;
+    }
     let outcome = app.store.put_gearbox(&row).await.map_err(|e| match e {
         StoreError::Conflict(m) => ApiError::new(
             StatusCode::CONFLICT,

@@ -62,6 +62,28 @@ async fn a_table_extension_is_claimed_once_and_the_table_stays_ready(b: Backend)
         return;
     };
     let st = store::connect(&db.url).await.unwrap();
+    // A first job that waits for its machines (`lease_until` of a queued job: not before) is
+    // not claimed early, unless made due.
+    let mut waits = gearbox("gw", "h1");
+    waits.lease_until = 5_000;
+    st.put_gearbox(&waits).await.unwrap();
+    assert!(
+        st.claim_gearbox_job(100, 1_000, "A")
+            .await
+            .unwrap()
+            .is_none()
+    );
+    assert!(st.expedite_gearbox_job("gw").await.unwrap());
+    let got = st
+        .claim_gearbox_job(100, 1_000, "A")
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!(got.id, "gw");
+    assert!(
+        !st.expedite_gearbox_job("gw").await.unwrap(),
+        "running: nothing to expedite"
+    );
     st.put_gearbox(&gearbox("gx", "h1")).await.unwrap();
     // Not ready yet: nothing to extend.
     assert!(!st.request_extension("gx", "h1", 10).await.unwrap());

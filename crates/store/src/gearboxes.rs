@@ -27,6 +27,7 @@ pub struct GearboxRow {
     pub progress: f64,
     pub error: Option<String>,
     pub claimed_by: Option<String>,
+    /// A running job's lease (unix ms); a queued job's earliest claim (0: at once).
     pub lease_until: i64,
     pub attempts: i64,
     pub created_at: i64,
@@ -131,8 +132,9 @@ pub trait GearboxStore: Send + Sync {
     async fn list_gearboxes(&self) -> StoreResult<Vec<GearboxRow>>;
     /// The signature table JSON of a `ready` gearbox whose description hash is `hash`.
     async fn gearbox_table(&self, id: &str, hash: &str) -> StoreResult<Option<String>>;
-    /// Claim one table job for `worker` until `now + lease_ms`: a queued one, or a running one
-    /// whose lease ran out (its replica stopped). Compare-and-set: one replica wins each job.
+    /// Claim one table job for `worker` until `now + lease_ms`: a queued one due (its
+    /// `lease_until` at `now` or before), or a running one whose lease ran out (its replica
+    /// stopped). Compare-and-set: one replica wins each job.
     async fn claim_gearbox_job(
         &self,
         now: i64,
@@ -163,6 +165,9 @@ pub trait GearboxStore: Send + Sync {
     /// Give a claimed job back (the replica is stopping): queued again at once, for any
     /// replica, instead of after its lease.
     async fn release_gearbox_job(&self, id: &str, hash: &str, worker: &str) -> StoreResult<bool>;
+    /// Make a queued job due at once (what its table must cover changed); `true` when it was
+    /// queued.
+    async fn expedite_gearbox_job(&self, id: &str) -> StoreResult<bool>;
 }
 
 /// The SQL of [`GearboxStore`] for one backend: `$store` is the store type, `$db` its
@@ -239,8 +244,8 @@ macro_rules! gearboxes_sql {
                 // A write first (SQLite takes its write lock at once).
                 let ins = sqlx::query(
                     "INSERT INTO gearboxes (id, name, source, source_format, description, hash, \
-                     builtin, status, progress, created_at, updated_at) \
-                     VALUES ($1, $2, $3, $4, $5, $6, 0, 'queued', 0, $7, $7) \
+                     builtin, status, progress, created_at, updated_at, lease_until) \
+                     VALUES ($1, $2, $3, $4, $5, $6, 0, 'queued', 0, $7, $7, $8) \
                      ON CONFLICT (id) DO NOTHING",
                 )
                 .bind(&g.id)
@@ -250,6 +255,7 @@ macro_rules! gearboxes_sql {
                 .bind(&g.description)
                 .bind(&g.hash)
                 .bind(g.created_at)
+                .bind(g.lease_until)
                 .execute(&mut *tx)
                 .await?;
                 let outcome = if ins.rows_affected() == 1 {
@@ -258,7 +264,7 @@ macro_rules! gearboxes_sql {
                     let upd = sqlx::query(
                         "UPDATE gearboxes SET name = $2, source = $3, source_format = $4, \
                          description = $5, hash = $6, status = 'queued', progress = 0, \
-                         error = NULL, claimed_by = NULL, lease_until = 0, attempts = 0, \
+                         error = NULL, claimed_by = NULL, lease_until = $8, attempts = 0, \
                          signature_table = NULL, updated_at = $7, started_at = NULL, \
                          finished_at = NULL, table_columns = NULL, extension_status = NULL, \
                          extension_progress = 0, extension_error = NULL, \
@@ -274,6 +280,7 @@ macro_rules! gearboxes_sql {
                     .bind(&g.description)
                     .bind(&g.hash)
                     .bind(g.created_at)
+                    .bind(g.lease_until)
                     .execute(&mut *tx)
                     .await?;
                     if upd.rows_affected() == 1 {
@@ -377,7 +384,8 @@ macro_rules! gearboxes_sql {
                 worker: &str,
             ) -> StoreResult<Option<GearboxRow>> {
                 let due = sqlx::query(
-                    "SELECT id, hash FROM gearboxes WHERE builtin = 0 AND (status = 'queued' \
+                    "SELECT id, hash FROM gearboxes WHERE builtin = 0 AND \
+                     ((status = 'queued' AND lease_until <= $1) \
                      OR (status = 'running' AND lease_until < $1)) \
                      ORDER BY updated_at, id LIMIT 4",
                 )
@@ -392,7 +400,8 @@ macro_rules! gearboxes_sql {
                         "UPDATE gearboxes SET status = 'running', claimed_by = $3, \
                          lease_until = $4, attempts = attempts + 1, updated_at = $2, \
                          started_at = COALESCE(started_at, $2) \
-                         WHERE id = $1 AND hash = $5 AND builtin = 0 AND (status = 'queued' \
+                         WHERE id = $1 AND hash = $5 AND builtin = 0 AND \
+                         ((status = 'queued' AND lease_until <= $2) \
                          OR (status = 'running' AND lease_until < $2))",
                     )
                     .bind(&id)
@@ -484,6 +493,17 @@ macro_rules! gearboxes_sql {
                 .bind(id)
                 .bind(hash)
                 .bind(worker)
+                .execute(&self.pool)
+                .await?;
+                Ok(r.rows_affected() == 1)
+            }
+
+            async fn expedite_gearbox_job(&self, id: &str) -> StoreResult<bool> {
+                let r = sqlx::query(
+                    "UPDATE gearboxes SET lease_until = 0 \
+                     WHERE id = $1 AND status = 'queued' AND builtin = 0",
+                )
+                .bind(id)
                 .execute(&self.pool)
                 .await?;
                 Ok(r.rows_affected() == 1)

@@ -34,6 +34,11 @@ use crate::signature::coverage::{SpeedSpan, covers, described_spans, plan_column
 use crate::signature::precompute::default_grid;
 use crate::store::{GearboxRow, TableSpeed};
 
+/// How long the first table job of a gearbox described without `nominal_input_hz` waits for
+/// a machine to be configured on it (a machine's PUT makes it due at once): without one, the
+/// default grid is the paper's band, which a machine's speeds would replace.
+pub const WAIT_FOR_MACHINES_MS: i64 = 5_000;
+
 /// The spans a machine's configuration asks of its gearbox's table.
 pub fn machine_spans(input_shaft_hz: Option<f64>, range: Option<(f64, f64)>) -> Vec<SpeedSpan> {
     let mut v: Vec<SpeedSpan> = input_shaft_hz
@@ -145,9 +150,19 @@ fn too_large(e: &crate::Error, member: &str) -> ApiError {
 
 /// After a change of the demand (a machine configured): queue an extension of `row`'s ready
 /// table when its columns no longer cover the demand, and wake the worker. A table not ready
-/// yet is laid over the demand when its job starts (and checked again when it ends).
+/// yet is laid over the demand when its job starts (a queued one is made due at once) and
+/// checked again when it ends.
 pub async fn extend_if_needed(app: &AppState, row: &GearboxRow) -> ApiResult<bool> {
-    if row.builtin || row.status != TableStatus::Ready {
+    if row.builtin {
+        return Ok(false);
+    }
+    if row.status == TableStatus::Queued {
+        if app.store.expedite_gearbox_job(&row.id).await? {
+            app.job_wake.notify_one();
+        }
+        return Ok(false);
+    }
+    if row.status != TableStatus::Ready {
         return Ok(false);
     }
     let gb = app
