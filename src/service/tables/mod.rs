@@ -365,3 +365,131 @@ pub fn answer_miss(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use super::*;
+    use crate::assessment::{Baselines, Machine, RecordFacts, TableDiagnoser, assess};
+    use crate::diagnosis::DiagnoseOptions;
+    use crate::signature::SensorQuantity;
+    use crate::signature::precompute::{
+        MeasurementSpec, PrecomputeSpec, precompute, simulate_measurement,
+    };
+    use crate::signature::table::Grid;
+
+    const SPUR: &str = include_str!("../../../configs/gearboxes/spur-pair.toml");
+
+    /// A record of the spur pair at 40 Hz assessed against a one-column table at 25 Hz, by a
+    /// machine whose tables are extended: a `table-in-progress` miss. With its gearbox row.
+    fn missed() -> (Assessment, GearboxRow, Arc<Gearbox>) {
+        let (mut row, gb) = GearboxRow::described("spur", SPUR, None, "test").unwrap();
+        let gb = Arc::new(gb);
+        let omega = |hz: f64| gb.f1_hz(hz) / gb.reference_frequency_hz();
+        let spec = PrecomputeSpec {
+            gearbox: gb.clone(),
+            sensor: SensorQuantity::default(),
+            grid: Grid {
+                ea: vec![0.1, 0.5],
+                omega1: vec![(omega(25.0) * 1e6).round() / 1e6],
+                seeds: 1,
+            },
+            settings: crate::signature::SimulationSettings {
+                periods: 64,
+                ..Default::default()
+            },
+            created_by: "test".into(),
+        };
+        let table = precompute(&spec, None, &|| {}).unwrap();
+        row.status = TableStatus::Ready;
+        row.table_columns = Some(table.grid.omega1.clone());
+        let d = TableDiagnoser::new(table, DiagnoseOptions::default()).unwrap();
+        let rec = simulate_measurement(
+            &gb,
+            &MeasurementSpec {
+                ea: 0.3,
+                omega1: omega(40.0),
+                sample_rate: 25_600.0,
+                duration: 1.0,
+                gain: 3.0,
+                snr_db: Some(25.0),
+                seed: 3,
+                sensor: SensorQuantity::Accel,
+                planetary: None,
+            },
+        )
+        .unwrap();
+        let baselines = Baselines::default();
+        let mut machine = Machine::described("spur", &gb, Some(&d), &baselines);
+        machine.extends_tables = true;
+        let facts = RecordFacts {
+            sample_rate_hz: rec.sample_rate,
+            shaft_hz: Some(40.0),
+            ..Default::default()
+        };
+        let mut channels = vec![("0".to_string(), rec.samples)];
+        let a = assess(&mut channels, &[0], &facts, &machine, &mut |_| {}).unwrap();
+        (a, row, gb.clone())
+    }
+
+    fn note(a: &Assessment) -> String {
+        match &a.reading {
+            Reading::NoTable(n) => n.wear_note.clone().unwrap_or_default(),
+            Reading::Table(_) => panic!("a reading"),
+        }
+    }
+
+    #[test]
+    fn a_speed_past_the_limit_is_answered_outside_table_with_the_reason() {
+        let (mut a, row, gb) = missed();
+        assert_eq!(withheld(&a), Some(WithheldReason::TableInProgress));
+        let hz = miss_hz(&a).unwrap();
+        assert!((hz / 40.0 - 1.0).abs() < 0.02, "{hz}");
+        assert!(
+            a.alert.reason.contains("follows when the table is ready"),
+            "{}",
+            a.alert.reason
+        );
+        let why = "covering input-shaft rates 1–400 Hz would take 4000 simulations".to_string();
+        answer_miss(&mut a, &row, &gb, &Err(why.clone()), true);
+        assert_eq!(withheld(&a), Some(WithheldReason::OutsideTable));
+        let n = note(&a);
+        assert!(n.contains(&why) && n.contains("not extended"), "{n}");
+        assert!(n.contains("25.00–25.00 Hz"), "the table's range: {n}");
+        assert!(miss_hz(&a).is_none(), "nothing left to queue");
+        // The alert quotes the new note and promises no table.
+        let r = &a.alert.reason;
+        assert!(
+            r.contains(&why) && !r.contains("follows when the table is ready"),
+            "{r}"
+        );
+        assert_eq!(a.assessed[0].alert.reason, *r);
+        // The stored answer says it too.
+        let body = serde_json::to_value(&a).unwrap();
+        assert_eq!(body["wear_withheld"], "outside-table", "{body}");
+    }
+
+    #[test]
+    fn a_queued_speed_says_the_extension_s_progress_and_without_samples_no_reread() {
+        let (mut a, row, gb) = missed();
+        let speed = Ok(TableSpeed {
+            gearbox_id: "spur".into(),
+            hash: row.hash.clone(),
+            input_hz: 40.0,
+            machine_id: "m".into(),
+        });
+        answer_miss(&mut a, &row, &gb, &speed, false);
+        assert_eq!(withheld(&a), Some(WithheldReason::TableInProgress));
+        let n = note(&a);
+        assert!(
+            n.contains("being extended") && n.ends_with("the extension is queued"),
+            "{n}"
+        );
+        assert!(
+            n.contains("not read again") && !n.contains("will be read again"),
+            "{n}"
+        );
+        assert!(a.alert.reason.contains(&n), "{}", a.alert.reason);
+    }
+}
