@@ -123,6 +123,13 @@ pub fn gearbox_json(row: &GearboxRow, gb: Option<&Gearbox>, full: bool) -> Value
         v["dynamics_estimated"] = json!(gb.dynamics_estimated());
         v["assumed"] = serde_json::to_value(&gb.assumed).unwrap_or(Value::Null);
         v["warnings"] = json!(gb.warnings);
+        // What the table covers (the built-in rig's is the served file: the service fills it
+        // in) and an extension pending on it.
+        v["covers"] = crate::service::tables::covers_json(
+            gb,
+            row.table_columns.as_deref().unwrap_or_default(),
+        );
+        v["extension"] = crate::service::tables::extension_json(row, gb);
     }
     v
 }

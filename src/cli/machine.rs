@@ -21,7 +21,7 @@ pub enum MachineCommand {
     /// Point a machine at a stored gearbox, with its nominal input-shaft rate, channels,
     /// tachometer, the channels' units and its ISO 20816-3 class (this registers it:
     /// `serve --require-registered-machines` takes its records).
-    Set(SetArgs),
+    Set(Box<SetArgs>),
     /// Delete a machine and everything of it: records, diagnoses, baseline, calibration
     /// (webhooks subscribed to `machine.deleted` are told). There is no undo.
     Delete(DeleteArgs),
@@ -37,6 +37,10 @@ pub struct SetArgs {
     /// Nominal input-shaft rate in Hz (a hint for finding the mesh lines).
     #[arg(long)]
     pub input_shaft_hz: Option<f64>,
+    /// The input shaft's range of rates, `LO:HI` in Hz, that the gearbox's table must cover
+    /// (like `speed_range_hz`; a running service extends the table when a record needs it).
+    #[arg(long, value_name = "LO:HI")]
+    pub speed_range_hz: Option<String>,
     /// Channel names the machine records, comma-separated (default: whatever a record brings).
     #[arg(long, value_delimiter = ',')]
     pub channels: Option<Vec<String>>,
@@ -66,7 +70,7 @@ pub struct DeleteArgs {
 /// `gearwear machine …`.
 pub fn run(a: MachineArgs) -> Result<()> {
     match a.command {
-        MachineCommand::Set(s) => set(s),
+        MachineCommand::Set(s) => set(*s),
         MachineCommand::Delete(d) => delete(d),
     }
 }
@@ -126,6 +130,23 @@ fn set(s: SetArgs) -> Result<()> {
     {
         bail!("--input-shaft-hz must be a rate in Hz above 0 and at most 1000, got {hz}");
     }
+    let speed_range_hz = match s.speed_range_hz.as_deref() {
+        None => None,
+        Some(t) => {
+            let parsed = t.split_once(':').and_then(|(a, b)| {
+                Some((a.trim().parse::<f64>().ok()?, b.trim().parse::<f64>().ok()?))
+            });
+            match parsed {
+                Some((lo, hi)) if lo.is_finite() && lo > 0.0 && lo < hi && hi <= 1000.0 => {
+                    Some((lo, hi))
+                }
+                _ => bail!(
+                    "--speed-range-hz is LO:HI, the input shaft's lowest and highest rate in Hz \
+                     (above 0, LO below HI, at most 1000), got `{t}`"
+                ),
+            }
+        }
+    };
     if let Err(e) = check_tacho(
         s.tacho_channel.as_deref(),
         s.tacho_ppr,
@@ -159,6 +180,7 @@ fn set(s: SetArgs) -> Result<()> {
                     channel_units: channel_units.clone(),
                     iso_group: iso.map(|c| i64::from(c.group)),
                     iso_support: iso.map(|c| c.support.as_str().to_string()),
+                    speed_range_hz,
                 },
                 now_ms(),
             )

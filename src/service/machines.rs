@@ -227,17 +227,24 @@ pub async fn baselines(
         created_at: m.created_at,
         hash: hash.to_string(),
         version: m.baseline_version,
-        table: diagnoser.as_ref().map(|d| d.table_id()),
+        // (Its columns too: an extended table keeps its description's hash.)
+        table: diagnoser
+            .as_ref()
+            .map(|d| format!("{}/{:?}", d.table_id(), d.table().grid.omega1)),
     };
     if let Some(b) = app.baselines.get(&m.id, &key) {
         return Ok(b);
     }
     let per = baseline_features(app, &m.id, hash).await?;
-    let fitted = tokio::task::spawn_blocking(move || {
-        Baselines::fit(&per).with_paths(&per, diagnoser.as_deref())
+    let table_ready = diagnoser.is_some();
+    let (fitted, per) = tokio::task::spawn_blocking(move || {
+        let b = Baselines::fit(&per).with_paths(&per, diagnoser.as_deref());
+        (b, per)
     })
     .await
     .map_err(|e| ApiError::internal(format!("fitting the baseline failed: {e}")))?;
+    // A baseline that changed may now be enough for the machine's own model.
+    super::physics::queue_if_fittable(app, m, hash, &per, table_ready).await;
     for (channel, e) in &fitted.unfitted {
         tracing::warn!(machine = %m.id, channel = %channel, error = %e, "a baseline could not be fitted");
     }
@@ -275,6 +282,10 @@ pub struct MachineBody {
     /// The machine's ISO 20816-3 class.
     #[serde(default)]
     pub iso_20816: Option<super::units::IsoBody>,
+    /// The range of input-shaft rates `[lo, hi]` Hz the machine runs over: part of what its
+    /// gearbox's table must cover ([`super::tables`]).
+    #[serde(default)]
+    pub speed_range_hz: Option<[f64; 2]>,
 }
 
 pub use crate::machine::{DEFAULT_TACHO_CHANNEL, MAX_TACHO_PPR, TachoProblem, check_tacho};
@@ -308,6 +319,7 @@ pub fn config_json(m: &MachineRow) -> Value {
         "tacho_ppr": m.tacho_ppr,
         "channel_units": channel_units,
         "iso_20816": iso,
+        "speed_range_hz": m.speed_range_hz.map(|(lo, hi)| [lo, hi]),
     })
 }
 
@@ -333,16 +345,23 @@ pub async fn put(
                 "{e}; expected {{\"gearbox\": \"<gearbox id>\", \"input_shaft_hz\"?: number, \
                  \"channels\"?: [names], \"tacho_channel\"?: name, \"tacho_ppr\"?: integer, \
                  \"channel_units\"?: {{\"<channel>\": {{\"unit\": \"g\"}}}}, \
-                 \"iso_20816\"?: {{\"group\": 1 or 2, \"support\": \"rigid\" or \"flexible\"}}}}"
+                 \"iso_20816\"?: {{\"group\": 1 or 2, \"support\": \"rigid\" or \"flexible\"}}, \
+                 \"speed_range_hz\"?: [lo, hi]}}"
             ),
         )
     })?;
     let gearbox = b.gearbox.unwrap_or_else(|| BUILTIN_ID.to_string());
     check_gearbox_id(&gearbox)?;
-    if app.store.get_gearbox(&gearbox).await?.is_none() {
-        if gearbox == BUILTIN_ID {
+    let gearbox_row = match app.store.get_gearbox(&gearbox).await? {
+        Some(r) => r,
+        None if gearbox == BUILTIN_ID => {
             super::gearboxes::ensure_builtin(&app).await?;
-        } else {
+            app.store
+                .get_gearbox(BUILTIN_ID)
+                .await?
+                .ok_or_else(|| ApiError::internal("the built-in gearbox is missing"))?
+        }
+        None => {
             return Err(ApiError::unprocessable(
                 "unknown-gearbox",
                 "Unknown gearbox",
@@ -352,7 +371,7 @@ pub async fn put(
             )
             .with("gearbox_id", gearbox.as_str()));
         }
-    }
+    };
     if let Some(hz) = b.input_shaft_hz
         && !(hz.is_finite() && hz > 0.0 && hz <= 1000.0)
     {
@@ -362,6 +381,14 @@ pub async fn put(
             format!("`input_shaft_hz` must be a rate in Hz above 0 and at most 1000, got {hz}"),
         ));
     }
+    let speed_range = check_speed_range(b.speed_range_hz)?;
+    let spans = super::tables::machine_spans(b.input_shaft_hz, speed_range);
+    let member = if speed_range.is_some() {
+        "speed_range_hz"
+    } else {
+        "input_shaft_hz"
+    };
+    super::tables::check_machine(&app, &id, &gearbox_row, &spans, member).await?;
     if let Some(ch) = &b.channels {
         let bad = ch.is_empty()
             || ch.len() > 64
@@ -412,10 +439,15 @@ pub async fn put(
                 channel_units,
                 iso_group: iso.map(|c| i64::from(c.group)),
                 iso_support: iso.map(|c| c.support.as_str().to_string()),
+                speed_range_hz: speed_range,
             },
             now_ms(),
         )
         .await?;
+    // Its speeds may lie beyond the gearbox's table: extended in the background.
+    if let Err(e) = super::tables::extend_if_needed(&app, &gearbox_row).await {
+        tracing::warn!(machine = %id, error = %e.detail, "the table's demand was not checked");
+    }
     let m = app
         .store
         .get_machine(&id)
@@ -429,6 +461,25 @@ pub async fn put(
         StatusCode::OK
     };
     Ok((status, Json(body)).into_response())
+}
+
+/// A `speed_range_hz` as stored: positive rates, the lower first, at most 1000 Hz.
+fn check_speed_range(r: Option<[f64; 2]>) -> ApiResult<Option<(f64, f64)>> {
+    let Some([lo, hi]) = r else {
+        return Ok(None);
+    };
+    if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo < hi && hi <= 1000.0) {
+        return Err(ApiError::unprocessable(
+            "invalid-machine",
+            "Invalid machine configuration",
+            format!(
+                "`speed_range_hz` is `[lo, hi]`, the input shaft's lowest and highest rate in Hz: \
+                 above 0, lo below hi, at most 1000; got [{lo}, {hi}]"
+            ),
+        )
+        .with("member", "speed_range_hz"));
+    }
+    Ok(Some((lo, hi)))
 }
 
 /// The `baseline` object of a machine: its records and, per channel, how many and whether a
@@ -481,7 +532,15 @@ pub async fn baseline_json(app: &AppState, m: &MachineRow) -> ApiResult<Value> {
             )
         })
         .collect();
+    let physics = match &row {
+        Some(r) => {
+            let stored = app.store.get_machine_physics(&m.id).await?;
+            super::physics::physics_json(stored.as_ref(), &super::physics::key_of(m, &r.hash))
+        }
+        None => Value::Null,
+    };
     Ok(json!({
+        "physics": physics,
         "records": records,
         "count": rows.len(),
         "min_records": MIN_BASELINE_RECORDS,

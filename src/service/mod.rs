@@ -36,10 +36,12 @@ pub mod lifecycle;
 pub mod machines;
 pub mod metrics;
 pub mod mqtt;
+pub mod physics;
 pub mod read;
 pub mod records;
 pub mod signatures;
 pub mod spectrum;
+pub mod tables;
 pub mod trend;
 pub mod units;
 pub mod webhooks;
@@ -72,6 +74,10 @@ pub struct Inner {
     pub builtin_gearbox: Arc<crate::gearbox::Gearbox>,
     /// The machines' fitted baselines, refitted when a baseline changes.
     pub baselines: machines::BaselineCache,
+    /// The machines' own models this replica loaded.
+    pub physics: physics::PhysicsCache,
+    /// Wakes the own-model worker (a job was queued).
+    pub physics_wake: Notify,
 }
 
 impl std::ops::Deref for AppState {
@@ -108,6 +114,8 @@ impl AppState {
             tables: gearboxes::Tables::default(),
             builtin_gearbox: Arc::new(crate::gearbox::Gearbox::paper_rig()),
             baselines: machines::BaselineCache::default(),
+            physics: physics::PhysicsCache::default(),
+            physics_wake: Notify::new(),
         }))
     }
 }
@@ -318,7 +326,8 @@ pub async fn serve(
     }
     let (stop_tx, stop_rx) = watch::channel(false);
     let worker = tokio::spawn(webhooks::worker(state.clone(), stop_rx.clone()));
-    let jobs = tokio::spawn(gearboxes::worker(state.clone(), stop_rx.clone()));
+    let jobs = tokio::spawn(tables::jobs::worker(state.clone(), stop_rx.clone()));
+    let own_models = tokio::spawn(physics::worker(state.clone(), stop_rx.clone()));
     let mqtt = state
         .settings
         .mqtt
@@ -332,6 +341,7 @@ pub async fn serve(
     let _ = stop_tx.send(true);
     let _ = worker.await;
     let _ = jobs.await;
+    let _ = own_models.await;
     let _ = retention.await;
     if let Some(m) = mqtt {
         let _ = m.await;

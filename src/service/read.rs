@@ -44,6 +44,9 @@ pub fn diagnosis_summary(d: &DiagnosisRow) -> Value {
         "motion_state": d.motion_state,
         "novelty": novelty_json(d),
         "channel": d.channel,
+        "wear_withheld": d.wear_withheld,
+        "reread": d.reread_status,
+        "replaces": d.replaces,
     })
 }
 

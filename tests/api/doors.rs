@@ -18,6 +18,7 @@ use crate::both_stores;
 use crate::helpers::*;
 use crate::mqtt::{Broker, client, mqtt_settings, wait_connected};
 use crate::operating_state::{FS, HELICAL, PPR, channels, get, record, wait_ready};
+use crate::tables::{covers, wait_gearbox};
 
 both_stores!(http_mqtt_and_the_cli_assess_a_record_alike);
 
@@ -88,11 +89,22 @@ async fn http_mqtt_and_the_cli_assess_a_record_alike(b: Backend) {
     let (s, m) = put_machine(
         &app,
         "gb",
-        json!({"gearbox": "helical", "tacho_channel": "tacho", "tacho_ppr": PPR}),
+        // Its speeds: the table covers them before any record comes (none is read again
+        // after an extension, so the table handed to the CLI is the one every record met).
+        json!({"gearbox": "helical", "tacho_channel": "tacho", "tacho_ppr": PPR,
+               "speed_range_hz": [27.0, 44.0]}),
     )
     .await;
     assert_eq!(s, 201, "{m}");
     wait_ready(&app, "helical").await;
+    wait_gearbox(
+        &app,
+        "helical",
+        "the table over 27–44 Hz",
+        Duration::from_secs(300),
+        |g| covers(g, 27.0, 44.0),
+    )
+    .await;
     let row = app.store.get_gearbox("helical").await.unwrap().unwrap();
     let table = app
         .store
@@ -123,6 +135,27 @@ async fn http_mqtt_and_the_cli_assess_a_record_alike(b: Backend) {
     }
     std::fs::write(dir.join("manifest.csv"), manifest).unwrap();
 
+    // The machine's own model, fitted by the service in the background: every door reads the
+    // damaged record against it (or, refused, through the calibrated path).
+    let t0 = std::time::Instant::now();
+    let physics = loop {
+        let b = get(
+            &app,
+            "/v1/machines/gb/baseline",
+            "/v1/machines/{machine_id}/baseline",
+        )
+        .await;
+        let p = b["physics"].clone();
+        match p["status"].as_str() {
+            Some("ready" | "refused") if p["current"] == true => break p,
+            Some("failed") => panic!("{p}"),
+            _ => {}
+        }
+        assert!(t0.elapsed() < Duration::from_secs(400), "not done: {p}");
+        tokio::time::sleep(Duration::from_millis(500)).await;
+    };
+    eprintln!("the machine's own model: {}", physics["status"]);
+
     // The damaged record through each door.
     let damaged = record(35.0, 102, true, Some("low"));
     let http = post(&app, "", &damaged).await;
@@ -148,8 +181,6 @@ async fn http_mqtt_and_the_cli_assess_a_record_alike(b: Backend) {
         dir.join("manifest.csv").to_str().unwrap(),
         "--model-report",
         dir.join("model.json").to_str().unwrap(),
-        // The service reads this machine through its calibrated path (it fits no physics).
-        "--no-own-model",
     ]))
     .unwrap();
 

@@ -354,6 +354,7 @@ async fn the_store_refuses_an_unregistered_machine_inside_the_transaction(b: Bac
             channel_units: None,
             iso_group: None,
             iso_support: None,
+            speed_range_hz: None,
         },
         5,
     )

@@ -302,12 +302,15 @@ async fn a_tachometer_machine_is_judged_at_its_operating_state(b: Backend) {
             }
             _ => panic!("{model}"),
         }
-        // The transfer path through the table: the 35 and 40 Hz records carry line ratios
-        // (30 Hz lies outside the table), so a path is calibrated or refused with the reason.
+        // The transfer path through the table: the 35 and 40 Hz records carry line ratios, so
+        // a path is calibrated or refused with the reason. (30 Hz lies outside the table: its
+        // records carry ratios once the table is extended to it and they are read again, in
+        // the background — two speeds, or three when that was quicker than these records.)
         let path = &c["path"];
         match path["status"].as_str() {
             Some("calibrated") => {
-                assert_eq!(path["f1_hz"].as_array().unwrap().len(), 2, "{path}");
+                let speeds = path["f1_hz"].as_array().unwrap().len();
+                assert!(matches!(speeds, 2 | 3), "{path}");
                 assert!(
                     path["residual_db"].as_f64().unwrap()
                         < path["plain_residual_db"].as_f64().unwrap(),

@@ -5,7 +5,7 @@
 use gearwear::store::queue::IngestQueue;
 use gearwear::store::{
     self, DiagnosisRow, GearboxRow, IdemRow, Ingest, MachineConfig, NewRecord, PutOutcome,
-    StoreError, new_id,
+    StoreError, TableSpeed, TableText, new_id,
 };
 
 use crate::both_stores;
@@ -16,6 +16,7 @@ both_stores!(
     concurrent_records_share_commits_and_are_each_stored_once,
     idempotency_answers_expire_records_stay,
     a_table_job_is_claimed_once_and_taken_over_after_its_lease,
+    a_table_extension_is_claimed_once_and_the_table_stays_ready,
     a_gearbox_put_again_is_unchanged_and_a_new_description_requeues,
     baseline_marks_touch_only_the_machine_s_records,
     a_database_from_before_the_tachometer_keeps_working,
@@ -41,7 +42,152 @@ fn gearbox(id: &str, hash: &str) -> GearboxRow {
         updated_at: 1,
         started_at: None,
         finished_at: None,
+        table_columns: None,
+        extension: None,
     }
+}
+
+fn table_text(json: &str) -> TableText {
+    TableText {
+        json: json.into(),
+        columns: vec![0.5, 0.6],
+    }
+}
+
+/// An extension of a ready table: queued only when the table is ready and none is pending (a
+/// record's speed queues it), claimed by one replica, taken over after its lease; the table
+/// stays ready with its old columns until the extension's table replaces it.
+async fn a_table_extension_is_claimed_once_and_the_table_stays_ready(b: Backend) {
+    let Some(db) = TestDb::new(b).await else {
+        return;
+    };
+    let st = store::connect(&db.url).await.unwrap();
+    // A first job that waits for its machines (`lease_until` of a queued job: not before) is
+    // not claimed early, unless made due.
+    let mut waits = gearbox("gw", "h1");
+    waits.lease_until = 5_000;
+    st.put_gearbox(&waits).await.unwrap();
+    assert!(
+        st.claim_gearbox_job(100, 1_000, "A")
+            .await
+            .unwrap()
+            .is_none()
+    );
+    assert!(st.expedite_gearbox_job("gw").await.unwrap());
+    let got = st
+        .claim_gearbox_job(100, 1_000, "A")
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!(got.id, "gw");
+    assert!(
+        !st.expedite_gearbox_job("gw").await.unwrap(),
+        "running: nothing to expedite"
+    );
+    st.put_gearbox(&gearbox("gx", "h1")).await.unwrap();
+    // Not ready yet: nothing to extend.
+    assert!(!st.request_extension("gx", "h1", 10).await.unwrap());
+    st.claim_gearbox_job(10, 1_000, "A").await.unwrap().unwrap();
+    st.finish_gearbox_job("gx", "h1", "A", Ok(table_text("{\"v\":1}")), 20)
+        .await
+        .unwrap();
+    // A record's speed, twice: stored once, the extension queued once.
+    let speed = TableSpeed {
+        gearbox_id: "gx".into(),
+        hash: "h1".into(),
+        input_hz: 40.004,
+        machine_id: "m".into(),
+    };
+    st.add_table_speed(&speed, 30).await.unwrap();
+    st.add_table_speed(&speed, 31).await.unwrap();
+    assert_eq!(st.table_speeds("gx", "h1").await.unwrap(), vec![40.0]);
+    assert!(st.table_speeds("gx", "h2").await.unwrap().is_empty());
+    let g = st.get_gearbox("gx").await.unwrap().unwrap();
+    assert_eq!(g.status.as_str(), "ready");
+    assert_eq!(g.table_columns.as_deref(), Some(&[0.5, 0.6][..]));
+    assert_eq!(
+        g.extension.as_ref().map(|x| x.status.as_str()),
+        Some("queued")
+    );
+    assert!(!st.request_extension("gx", "h1", 32).await.unwrap());
+    let (a, bb) = tokio::join!(
+        st.claim_extension(100, 1_000, "A"),
+        st.claim_extension(100, 1_000, "B")
+    );
+    let (a, bb) = (a.unwrap(), bb.unwrap());
+    assert!(a.is_some() != bb.is_some(), "exactly one claims it");
+    let holder = if a.is_some() { "A" } else { "B" };
+    let other = if holder == "A" { "B" } else { "A" };
+    assert!(
+        st.extension_progress("gx", "h1", holder, 0.5, Some(&[0.4, 0.5, 0.6]), 1_100, 200)
+            .await
+            .unwrap()
+    );
+    assert!(
+        st.claim_extension(900, 1_000, other)
+            .await
+            .unwrap()
+            .is_none()
+    );
+    let took = st
+        .claim_extension(1_200, 1_000, other)
+        .await
+        .unwrap()
+        .unwrap();
+    let x = took.extension.unwrap();
+    assert_eq!((x.claimed_by.as_deref(), x.attempts), (Some(other), 2));
+    assert_eq!(x.columns.as_deref(), Some(&[0.4, 0.5, 0.6][..]));
+    // The table is still the first one, ready.
+    assert_eq!(
+        st.gearbox_table("gx", "h1").await.unwrap().as_deref(),
+        Some("{\"v\":1}")
+    );
+    let wider = TableText {
+        json: "{\"v\":2}".into(),
+        columns: vec![0.4, 0.5, 0.6],
+    };
+    assert!(
+        !st.finish_extension("gx", "h1", holder, Ok(Some(wider.clone())), 1_300)
+            .await
+            .unwrap()
+    );
+    assert!(
+        st.finish_extension("gx", "h1", other, Ok(Some(wider)), 1_400)
+            .await
+            .unwrap()
+    );
+    let g = st.get_gearbox("gx").await.unwrap().unwrap();
+    assert!(g.extension.is_none(), "{:?}", g.extension);
+    assert_eq!(g.table_columns.as_deref(), Some(&[0.4, 0.5, 0.6][..]));
+    assert_eq!(
+        st.gearbox_table("gx", "h1").await.unwrap().as_deref(),
+        Some("{\"v\":2}")
+    );
+    // A failed extension leaves the table, and is queued again by the next request.
+    assert!(st.request_extension("gx", "h1", 1_500).await.unwrap());
+    st.claim_extension(1_600, 1_000, "A")
+        .await
+        .unwrap()
+        .unwrap();
+    assert!(
+        st.finish_extension("gx", "h1", "A", Err("too large".into()), 1_700)
+            .await
+            .unwrap()
+    );
+    let g = st.get_gearbox("gx").await.unwrap().unwrap();
+    let x = g.extension.unwrap();
+    assert_eq!(
+        (x.status.as_str(), x.error.as_deref()),
+        ("failed", Some("too large"))
+    );
+    assert_eq!(g.status.as_str(), "ready");
+    assert!(st.request_extension("gx", "h1", 1_800).await.unwrap());
+    // A new description drops its speeds, columns and extension.
+    st.put_gearbox(&gearbox("gx", "h2")).await.unwrap();
+    let g = st.get_gearbox("gx").await.unwrap().unwrap();
+    assert!(g.extension.is_none() && g.table_columns.is_none());
+    assert!(st.table_speeds("gx", "h1").await.unwrap().is_empty());
+    st.close().await;
 }
 
 /// Two replicas racing for one job: exactly one claims it; the other gets it only once the
@@ -101,12 +247,12 @@ async fn a_table_job_is_claimed_once_and_taken_over_after_its_lease(b: Backend) 
             .unwrap()
     );
     assert!(
-        !st.finish_gearbox_job("gb1", "h1", holder, Ok("late".into()), 2_200)
+        !st.finish_gearbox_job("gb1", "h1", holder, Ok(table_text("late")), 2_200)
             .await
             .unwrap()
     );
     assert!(
-        st.finish_gearbox_job("gb1", "h1", other, Ok("{\"t\":1}".into()), 2_300)
+        st.finish_gearbox_job("gb1", "h1", other, Ok(table_text("{\"t\":1}")), 2_300)
             .await
             .unwrap()
     );
@@ -204,6 +350,7 @@ async fn baseline_marks_touch_only_the_machine_s_records(b: Backend) {
         channel_units: Some(r#"{"a1":{"unit":"V","sensitivity_mv_per_g":100.0}}"#.into()),
         iso_group: Some(2),
         iso_support: Some("rigid".into()),
+        speed_range_hz: Some((25.0, 35.0)),
     };
     assert!(st.put_machine(&cfg, 5).await.unwrap());
     assert!(!st.put_machine(&cfg, 6).await.unwrap());
@@ -220,6 +367,7 @@ async fn baseline_marks_touch_only_the_machine_s_records(b: Backend) {
         (m.iso_group, m.iso_support.as_deref()),
         (Some(2), Some("rigid"))
     );
+    assert_eq!(m.speed_range_hz, Some((25.0, 35.0)));
     // A later PUT without units clears them (a configuration is replaced whole).
     let unitless = MachineConfig {
         channel_units: None,
@@ -297,6 +445,10 @@ pub fn ingest(machine: &str, idem: Option<&str>, t: i64) -> Ingest {
             novelty_threshold: None,
             channel: None,
             measured_at: t,
+            wear_withheld: None,
+            reread_status: None,
+            reread_request: None,
+            replaces: None,
         },
         idempotency: idem.map(|k| IdemRow {
             key_id: "key".into(),
@@ -308,6 +460,7 @@ pub fn ingest(machine: &str, idem: Option<&str>, t: i64) -> Ingest {
         event_extras: Default::default(),
         registered_only: false,
         alert: None,
+        table_speed: None,
     }
 }
 

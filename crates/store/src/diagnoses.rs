@@ -31,6 +31,28 @@ pub struct DiagnosisRow {
     /// When its record was measured, unix ms: the record's `recorded_at`, else its receive
     /// time. Series are ordered by it.
     pub measured_at: i64,
+    /// The code of a withheld wear figure (`table-in-progress`, `outside-table`, …), `None`
+    /// when the figure is given (and for diagnoses stored before migration 0012).
+    pub wear_withheld: Option<String>,
+    /// Whether its record is read again: `pending` (a table-in-progress diagnosis, until the
+    /// table covers its record), `done` (a later diagnosis replaces it), `unavailable` (the
+    /// record's raw samples were not kept); `None`: nothing to read again.
+    pub reread_status: Option<String>,
+    /// What the record came with besides its samples (JSON), while the re-read is pending; read
+    /// with the full row only.
+    pub reread_request: Option<String>,
+    /// On a re-read diagnosis: the id of the diagnosis it replaces.
+    pub replaces: Option<String>,
+}
+
+/// A diagnosis whose record is read again when its gearbox's table covers it.
+#[derive(Debug, Clone)]
+pub struct PendingReread {
+    pub diagnosis_id: String,
+    pub record_id: String,
+    pub machine_id: String,
+    /// What the record came with besides its samples (JSON).
+    pub request: Option<String>,
 }
 
 /// Reading diagnoses back (they are written by
@@ -61,9 +83,21 @@ pub trait DiagnosisStore: Send + Sync {
         limit: i64,
     ) -> StoreResult<Vec<DiagnosisRow>>;
     async fn get_diagnosis(&self, id: &str) -> StoreResult<Option<DiagnosisRow>>;
-    /// The diagnosis of one record (every stored record has one), found through the record's
-    /// machine so that the lookup walks the `diagnoses_machine` index, not the whole table.
+    /// The latest diagnosis of one record (every stored record has one; a re-read adds
+    /// another), found through the record's machine so that the lookup walks the
+    /// `diagnoses_machine` index, not the whole table.
     async fn diagnosis_of_record(&self, record_id: &str) -> StoreResult<Option<DiagnosisRow>>;
+    /// The pending re-reads of the machines whose gearbox is `gearbox_id`, oldest first.
+    async fn pending_rereads(
+        &self,
+        gearbox_id: &str,
+        limit: i64,
+    ) -> StoreResult<Vec<PendingReread>>;
+    /// The gearboxes with pending re-reads whose table is ready with no extension pending.
+    async fn reread_gearboxes(&self) -> StoreResult<Vec<String>>;
+    /// A stored record with its raw samples (`None` when they were not kept), for a re-read
+    /// (`sha256` is left empty).
+    async fn stored_record(&self, record_id: &str) -> StoreResult<Option<super::NewRecord>>;
 }
 
 /// The SQL of [`DiagnosisStore`] for one backend: `$store` is the store type, `$db` its
@@ -77,7 +111,7 @@ macro_rules! diagnoses_sql {
 
         const SUMMARY_COLS: &str = "seq, id, record_id, machine_id, created_at, ea_estimate, \
             ea_lower, ea_upper, alert_level, motion_state, has_wear, novelty_score, \
-            novelty_threshold, channel, measured_at";
+            novelty_threshold, channel, measured_at, wear_withheld, reread_status, replaces";
 
         fn diagnosis_row(
             r: &<$db as sqlx::Database>::Row,
@@ -125,11 +159,20 @@ macro_rules! diagnoses_sql {
                 measured_at: r
                     .try_get::<Option<i64>, _>("measured_at")?
                     .unwrap_or(r.try_get("created_at")?),
+                wear_withheld: r.try_get("wear_withheld")?,
+                reread_status: r.try_get("reread_status")?,
+                reread_request: if full {
+                    r.try_get("reread_request")?
+                } else {
+                    None
+                },
+                replaces: r.try_get("replaces")?,
             })
         }
 
         /// The latest `limit` diagnoses of a machine by measurement time, oldest first; with
-        /// their bodies when `body`.
+        /// their bodies when `body`. A diagnosis a re-read replaced is left out: the re-read
+        /// stands for its record.
         async fn latest_by_measurement(
             pool: &sqlx::Pool<$db>,
             machine_id: &str,
@@ -143,6 +186,7 @@ macro_rules! diagnoses_sql {
             };
             let rows = sqlx::query(sqlx::AssertSqlSafe(format!(
                 "SELECT {cols} FROM diagnoses WHERE machine_id = $1 \
+                 AND (reread_status IS NULL OR reread_status <> 'done') \
                  ORDER BY measured_at DESC, seq DESC LIMIT $2"
             )))
             .bind(machine_id)
@@ -210,12 +254,83 @@ macro_rules! diagnoses_sql {
                 let r = sqlx::query(
                     "SELECT d.* FROM records r JOIN diagnoses d \
                      ON d.machine_id = r.machine_id AND d.record_id = r.id \
-                     WHERE r.id = $1 ORDER BY d.seq LIMIT 1",
+                     WHERE r.id = $1 ORDER BY d.seq DESC LIMIT 1",
                 )
                 .bind(record_id)
                 .fetch_optional(&self.pool)
                 .await?;
                 r.as_ref().map(|r| diagnosis_row(r, true)).transpose()
+            }
+
+            async fn pending_rereads(
+                &self,
+                gearbox_id: &str,
+                limit: i64,
+            ) -> StoreResult<Vec<$crate::diagnoses::PendingReread>> {
+                let rows = sqlx::query(
+                    "SELECT d.id, d.record_id, d.machine_id, d.reread_request FROM diagnoses d \
+                     JOIN machines m ON m.id = d.machine_id \
+                     WHERE m.gearbox_id = $1 AND d.reread_status = 'pending' \
+                     ORDER BY d.seq LIMIT $2",
+                )
+                .bind(gearbox_id)
+                .bind(limit)
+                .fetch_all(&self.pool)
+                .await?;
+                rows.iter()
+                    .map(|r| {
+                        Ok($crate::diagnoses::PendingReread {
+                            diagnosis_id: r.try_get("id")?,
+                            record_id: r.try_get("record_id")?,
+                            machine_id: r.try_get("machine_id")?,
+                            request: r.try_get("reread_request")?,
+                        })
+                    })
+                    .collect()
+            }
+
+            async fn reread_gearboxes(&self) -> StoreResult<Vec<String>> {
+                let rows = sqlx::query(
+                    "SELECT DISTINCT g.id FROM diagnoses d \
+                     JOIN machines m ON m.id = d.machine_id \
+                     JOIN gearboxes g ON g.id = m.gearbox_id \
+                     WHERE d.reread_status = 'pending' AND g.status = 'ready' \
+                     AND g.extension_status IS NULL ORDER BY g.id",
+                )
+                .fetch_all(&self.pool)
+                .await?;
+                rows.iter().map(|r| Ok(r.try_get("id")?)).collect()
+            }
+
+            async fn stored_record(&self, record_id: &str) -> StoreResult<Option<NewRecord>> {
+                let r = sqlx::query("SELECT * FROM records WHERE id = $1")
+                    .bind(record_id)
+                    .fetch_optional(&self.pool)
+                    .await?;
+                let Some(r) = r else {
+                    return Ok(None);
+                };
+                Ok(Some(NewRecord {
+                    id: r.try_get("id")?,
+                    machine_id: r.try_get("machine_id")?,
+                    received_at: r.try_get("received_at")?,
+                    recorded_at: r.try_get("recorded_at")?,
+                    measured_at: r
+                        .try_get::<Option<i64>, _>("measured_at")?
+                        .unwrap_or(r.try_get("received_at")?),
+                    sensor: r.try_get("sensor")?,
+                    content_type: r.try_get("content_type")?,
+                    sample_rate_hz: r.try_get("sample_rate_hz")?,
+                    shaft_hz: r.try_get("shaft_hz")?,
+                    sample_count: r.try_get("sample_count")?,
+                    sha256: String::new(),
+                    features: r.try_get("features")?,
+                    samples: r.try_get("samples")?,
+                    baseline: r.try_get::<i64, _>("baseline")? != 0,
+                    channels: r
+                        .try_get::<Option<String>, _>("channels")?
+                        .and_then(|c| serde_json::from_str(&c).ok()),
+                }))
             }
         }
     };

@@ -27,12 +27,42 @@ pub struct GearboxRow {
     pub progress: f64,
     pub error: Option<String>,
     pub claimed_by: Option<String>,
+    /// A running job's lease (unix ms); a queued job's earliest claim (0: at once).
     pub lease_until: i64,
     pub attempts: i64,
     pub created_at: i64,
     pub updated_at: i64,
     pub started_at: Option<i64>,
     pub finished_at: Option<i64>,
+    /// The Ω1 columns of the stored table (`None` while none is stored, and for the built-in
+    /// rig, whose table is the served file).
+    pub table_columns: Option<Vec<f64>>,
+    /// An extension of the ready table to more columns, when one is pending (or failed).
+    pub extension: Option<Extension>,
+}
+
+/// A pending extension of a ready table ([`crate::TableExtensionStore`]): a job of its own
+/// beside the table, which stays ready and in use meanwhile.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Extension {
+    /// `queued`, `running` or `failed`.
+    pub status: TableStatus,
+    /// 0–1 while running.
+    pub progress: f64,
+    pub error: Option<String>,
+    pub claimed_by: Option<String>,
+    pub lease_until: i64,
+    pub attempts: i64,
+    /// The columns it computes towards (set when it is claimed).
+    pub columns: Option<Vec<f64>>,
+    pub queued_at: Option<i64>,
+}
+
+/// A computed table as stored: its JSON and its Ω1 columns.
+#[derive(Debug, Clone)]
+pub struct TableText {
+    pub json: String,
+    pub columns: Vec<f64>,
 }
 
 impl GearboxRow {
@@ -72,6 +102,8 @@ impl GearboxRow {
             updated_at: now,
             started_at: None,
             finished_at: None,
+            table_columns: None,
+            extension: None,
         };
         Ok((row, gb))
     }
@@ -100,8 +132,9 @@ pub trait GearboxStore: Send + Sync {
     async fn list_gearboxes(&self) -> StoreResult<Vec<GearboxRow>>;
     /// The signature table JSON of a `ready` gearbox whose description hash is `hash`.
     async fn gearbox_table(&self, id: &str, hash: &str) -> StoreResult<Option<String>>;
-    /// Claim one table job for `worker` until `now + lease_ms`: a queued one, or a running one
-    /// whose lease ran out (its replica stopped). Compare-and-set: one replica wins each job.
+    /// Claim one table job for `worker` until `now + lease_ms`: a queued one due (its
+    /// `lease_until` at `now` or before), or a running one whose lease ran out (its replica
+    /// stopped). Compare-and-set: one replica wins each job.
     async fn claim_gearbox_job(
         &self,
         now: i64,
@@ -119,19 +152,22 @@ pub trait GearboxStore: Send + Sync {
         lease_until: i64,
         now: i64,
     ) -> StoreResult<bool>;
-    /// Finish a claimed job: `Ok(table JSON)` → `ready`, `Err(reason)` → `failed`. `false`
+    /// Finish a claimed job: `Ok(table)` → `ready`, `Err(reason)` → `failed`. `false`
     /// when `worker` no longer holds it (nothing is written).
     async fn finish_gearbox_job(
         &self,
         id: &str,
         hash: &str,
         worker: &str,
-        result: Result<String, String>,
+        result: Result<TableText, String>,
         now: i64,
     ) -> StoreResult<bool>;
     /// Give a claimed job back (the replica is stopping): queued again at once, for any
     /// replica, instead of after its lease.
     async fn release_gearbox_job(&self, id: &str, hash: &str, worker: &str) -> StoreResult<bool>;
+    /// Make a queued job due at once (what its table must cover changed); `true` when it was
+    /// queued.
+    async fn expedite_gearbox_job(&self, id: &str) -> StoreResult<bool>;
 }
 
 /// The SQL of [`GearboxStore`] for one backend: `$store` is the store type, `$db` its
@@ -144,11 +180,40 @@ macro_rules! gearboxes_sql {
         use $crate::gearboxes::TableStatus;
         use $crate::*;
 
-        const GEARBOX_COLS: &str = "id, name, source, source_format, description, hash, builtin, \
-            status, progress, error, claimed_by, lease_until, attempts, created_at, updated_at, \
-            started_at, finished_at";
+        pub(crate) const GEARBOX_COLS: &str = "id, name, source, source_format, description, \
+            hash, builtin, status, progress, error, claimed_by, lease_until, attempts, \
+            created_at, updated_at, started_at, finished_at, table_columns, extension_status, \
+            extension_progress, extension_error, extension_claimed_by, extension_lease_until, \
+            extension_attempts, extension_columns, extension_queued_at";
 
-        fn gearbox_row(r: &<$db as sqlx::Database>::Row) -> StoreResult<GearboxRow> {
+        fn status(text: String) -> StoreResult<TableStatus> {
+            text.parse()
+                .map_err(|e: gearwear_core::words::UnknownWord| StoreError::Decode(e.to_string()))
+        }
+
+        /// A JSON array of columns as stored.
+        fn columns(text: Option<String>) -> StoreResult<Option<Vec<f64>>> {
+            text.map(|t| {
+                serde_json::from_str(&t)
+                    .map_err(|e| StoreError::Decode(format!("table columns: {e}")))
+            })
+            .transpose()
+        }
+
+        pub(crate) fn gearbox_row(r: &<$db as sqlx::Database>::Row) -> StoreResult<GearboxRow> {
+            let extension = match r.try_get::<Option<String>, _>("extension_status")? {
+                None => None,
+                Some(s) => Some($crate::gearboxes::Extension {
+                    status: status(s)?,
+                    progress: r.try_get("extension_progress")?,
+                    error: r.try_get("extension_error")?,
+                    claimed_by: r.try_get("extension_claimed_by")?,
+                    lease_until: r.try_get("extension_lease_until")?,
+                    attempts: r.try_get("extension_attempts")?,
+                    columns: columns(r.try_get("extension_columns")?)?,
+                    queued_at: r.try_get("extension_queued_at")?,
+                }),
+            };
             Ok(GearboxRow {
                 id: r.try_get("id")?,
                 name: r.try_get("name")?,
@@ -157,12 +222,7 @@ macro_rules! gearboxes_sql {
                 description: r.try_get("description")?,
                 hash: r.try_get("hash")?,
                 builtin: r.try_get::<i64, _>("builtin")? != 0,
-                status: r
-                    .try_get::<String, _>("status")?
-                    .parse()
-                    .map_err(|e: gearwear_core::words::UnknownWord| {
-                        StoreError::Decode(e.to_string())
-                    })?,
+                status: status(r.try_get("status")?)?,
                 progress: r.try_get("progress")?,
                 error: r.try_get("error")?,
                 claimed_by: r.try_get("claimed_by")?,
@@ -172,6 +232,8 @@ macro_rules! gearboxes_sql {
                 updated_at: r.try_get("updated_at")?,
                 started_at: r.try_get("started_at")?,
                 finished_at: r.try_get("finished_at")?,
+                table_columns: columns(r.try_get("table_columns")?)?,
+                extension,
             })
         }
 
@@ -182,8 +244,8 @@ macro_rules! gearboxes_sql {
                 // A write first (SQLite takes its write lock at once).
                 let ins = sqlx::query(
                     "INSERT INTO gearboxes (id, name, source, source_format, description, hash, \
-                     builtin, status, progress, created_at, updated_at) \
-                     VALUES ($1, $2, $3, $4, $5, $6, 0, 'queued', 0, $7, $7) \
+                     builtin, status, progress, created_at, updated_at, lease_until) \
+                     VALUES ($1, $2, $3, $4, $5, $6, 0, 'queued', 0, $7, $7, $8) \
                      ON CONFLICT (id) DO NOTHING",
                 )
                 .bind(&g.id)
@@ -193,6 +255,7 @@ macro_rules! gearboxes_sql {
                 .bind(&g.description)
                 .bind(&g.hash)
                 .bind(g.created_at)
+                .bind(g.lease_until)
                 .execute(&mut *tx)
                 .await?;
                 let outcome = if ins.rows_affected() == 1 {
@@ -201,9 +264,14 @@ macro_rules! gearboxes_sql {
                     let upd = sqlx::query(
                         "UPDATE gearboxes SET name = $2, source = $3, source_format = $4, \
                          description = $5, hash = $6, status = 'queued', progress = 0, \
-                         error = NULL, claimed_by = NULL, lease_until = 0, attempts = 0, \
+                         error = NULL, claimed_by = NULL, lease_until = $8, attempts = 0, \
                          signature_table = NULL, updated_at = $7, started_at = NULL, \
-                         finished_at = NULL WHERE id = $1 AND hash <> $6 AND builtin = 0",
+                         finished_at = NULL, table_columns = NULL, extension_status = NULL, \
+                         extension_progress = 0, extension_error = NULL, \
+                         extension_claimed_by = NULL, extension_lease_until = 0, \
+                         extension_attempts = 0, extension_columns = NULL, \
+                         extension_queued_at = NULL \
+                         WHERE id = $1 AND hash <> $6 AND builtin = 0",
                     )
                     .bind(&g.id)
                     .bind(&g.name)
@@ -212,9 +280,16 @@ macro_rules! gearboxes_sql {
                     .bind(&g.description)
                     .bind(&g.hash)
                     .bind(g.created_at)
+                    .bind(g.lease_until)
                     .execute(&mut *tx)
                     .await?;
                     if upd.rows_affected() == 1 {
+                        // The speeds measured against the old description go with it.
+                        sqlx::query("DELETE FROM table_speeds WHERE gearbox_id = $1 AND hash <> $2")
+                            .bind(&g.id)
+                            .bind(&g.hash)
+                            .execute(&mut *tx)
+                            .await?;
                         PutOutcome::Replaced
                     } else {
                         let builtin: i64 =
@@ -309,7 +384,8 @@ macro_rules! gearboxes_sql {
                 worker: &str,
             ) -> StoreResult<Option<GearboxRow>> {
                 let due = sqlx::query(
-                    "SELECT id, hash FROM gearboxes WHERE builtin = 0 AND (status = 'queued' \
+                    "SELECT id, hash FROM gearboxes WHERE builtin = 0 AND \
+                     ((status = 'queued' AND lease_until <= $1) \
                      OR (status = 'running' AND lease_until < $1)) \
                      ORDER BY updated_at, id LIMIT 4",
                 )
@@ -324,7 +400,8 @@ macro_rules! gearboxes_sql {
                         "UPDATE gearboxes SET status = 'running', claimed_by = $3, \
                          lease_until = $4, attempts = attempts + 1, updated_at = $2, \
                          started_at = COALESCE(started_at, $2) \
-                         WHERE id = $1 AND hash = $5 AND builtin = 0 AND (status = 'queued' \
+                         WHERE id = $1 AND hash = $5 AND builtin = 0 AND \
+                         ((status = 'queued' AND lease_until <= $2) \
                          OR (status = 'running' AND lease_until < $2))",
                     )
                     .bind(&id)
@@ -370,16 +447,23 @@ macro_rules! gearboxes_sql {
                 id: &str,
                 hash: &str,
                 worker: &str,
-                result: Result<String, String>,
+                result: Result<TableText, String>,
                 now: i64,
             ) -> StoreResult<bool> {
-                let (status, table, error, progress) = match result {
-                    Ok(t) => (TableStatus::Ready, Some(t), None, 1.0),
-                    Err(e) => (TableStatus::Failed, None, Some(e), 0.0),
+                let (status, table, cols, error, progress) = match result {
+                    Ok(t) => (
+                        TableStatus::Ready,
+                        Some(t.json),
+                        Some(serde_json::to_string(&t.columns).unwrap_or_default()),
+                        None,
+                        1.0,
+                    ),
+                    Err(e) => (TableStatus::Failed, None, None, Some(e), 0.0),
                 };
                 let r = sqlx::query(
                     "UPDATE gearboxes SET status = $4, signature_table = $5, error = $6, \
-                     progress = $7, finished_at = $8, updated_at = $8, lease_until = 0 \
+                     progress = $7, finished_at = $8, updated_at = $8, lease_until = 0, \
+                     table_columns = $9 \
                      WHERE id = $1 AND hash = $2 AND claimed_by = $3 AND status = 'running'",
                 )
                 .bind(id)
@@ -390,6 +474,7 @@ macro_rules! gearboxes_sql {
                 .bind(error)
                 .bind(progress)
                 .bind(now)
+                .bind(cols)
                 .execute(&self.pool)
                 .await?;
                 Ok(r.rows_affected() == 1)
@@ -408,6 +493,17 @@ macro_rules! gearboxes_sql {
                 .bind(id)
                 .bind(hash)
                 .bind(worker)
+                .execute(&self.pool)
+                .await?;
+                Ok(r.rows_affected() == 1)
+            }
+
+            async fn expedite_gearbox_job(&self, id: &str) -> StoreResult<bool> {
+                let r = sqlx::query(
+                    "UPDATE gearboxes SET lease_until = 0 \
+                     WHERE id = $1 AND status = 'queued' AND builtin = 0",
+                )
+                .bind(id)
                 .execute(&self.pool)
                 .await?;
                 Ok(r.rows_affected() == 1)

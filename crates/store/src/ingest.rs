@@ -7,6 +7,7 @@ use super::StoreResult;
 use super::alerts::AlertInput;
 use super::diagnoses::DiagnosisRow;
 use super::events::DiagnosisEvent;
+use super::extensions::TableSpeed;
 
 /// An accepted record's metadata, features and (optionally) raw samples.
 #[derive(Debug, Clone)]
@@ -63,32 +64,53 @@ pub struct Ingest {
     /// The record's step of its machine's alert episode (`None`: the episode is left as it
     /// is — the store's own tests).
     pub alert: Option<AlertInput>,
+    /// The record ran outside its gearbox's table: its speed, stored with it as part of what
+    /// the table must cover, and the table's extension queued (when it is ready and none is
+    /// pending).
+    pub table_speed: Option<TableSpeed>,
 }
 
 impl Ingest {
     /// The diagnosis as its events carry it, with the service's extras.
     pub fn diagnosis_event(&self) -> DiagnosisEvent {
-        let (ing, d) = (self, &self.diagnosis);
-        DiagnosisEvent {
-            machine_id: d.machine_id.clone(),
-            diagnosis_id: d.id.clone(),
-            record_id: d.record_id.clone(),
-            created_at: d.created_at,
-            measured_at: d.measured_at,
-            wear: d.has_wear.then_some(crate::events::Interval {
-                estimate: d.ea_estimate,
-                lower: d.ea_lower,
-                upper: d.ea_upper,
-            }),
-            alert_level: d.alert_level,
-            motion_state: d.motion_state.clone(),
-            novelty: d
-                .novelty_score
-                .zip(d.novelty_threshold)
-                .map(|(score, threshold)| crate::events::Novelty { score, threshold }),
-            channel: d.channel.clone(),
-            extras: ing.event_extras.clone(),
-        }
+        diagnosis_event(&self.diagnosis, &self.event_extras)
+    }
+}
+
+/// A record read again ([`IngestStore::store_reread`]): its new diagnosis (`replaces` names the
+/// pending one), the record's features as the new reading computed them, and the members its
+/// webhook event carries besides the row's.
+#[derive(Debug, Clone)]
+pub struct Reread {
+    pub diagnosis: DiagnosisRow,
+    pub features: String,
+    pub event_extras: serde_json::Map<String, serde_json::Value>,
+}
+
+/// Diagnosis `d` as its events carry it, with the service's `extras`.
+pub fn diagnosis_event(
+    d: &DiagnosisRow,
+    extras: &serde_json::Map<String, serde_json::Value>,
+) -> DiagnosisEvent {
+    DiagnosisEvent {
+        machine_id: d.machine_id.clone(),
+        diagnosis_id: d.id.clone(),
+        record_id: d.record_id.clone(),
+        created_at: d.created_at,
+        measured_at: d.measured_at,
+        wear: d.has_wear.then_some(crate::events::Interval {
+            estimate: d.ea_estimate,
+            lower: d.ea_lower,
+            upper: d.ea_upper,
+        }),
+        alert_level: d.alert_level,
+        motion_state: d.motion_state.clone(),
+        novelty: d
+            .novelty_score
+            .zip(d.novelty_threshold)
+            .map(|(score, threshold)| crate::events::Novelty { score, threshold }),
+        channel: d.channel.clone(),
+        extras: extras.clone(),
     }
 }
 
@@ -103,6 +125,15 @@ pub trait IngestStore: Send + Sync {
     /// commit), each in its own savepoint: the result of each, in order. When the commit
     /// fails, every record gets that error and none is stored.
     async fn ingest_batch(&self, ings: &[Ingest]) -> Vec<StoreResult<()>>;
+    /// Store a re-read in one transaction: the pending diagnosis it replaces marked `done`
+    /// (compare-and-set: `false`, and nothing written, when it is no longer pending — another
+    /// replica stored its re-read), the new diagnosis, the record's new features (a baseline
+    /// record's machine's `baseline_version` raised: its baseline changed), the machine's
+    /// latest diagnosis when it was the one replaced, and its `diagnosis.created` event. The
+    /// machine's alert episode is left as it is: the record was counted when it came.
+    async fn store_reread(&self, r: &Reread) -> StoreResult<bool>;
+    /// Set a pending re-read's status (`unavailable`: its record's raw samples are gone).
+    async fn mark_reread(&self, diagnosis_id: &str, status: &str) -> StoreResult<()>;
 }
 
 /// The SQL of [`IngestStore`] for one backend: `$store` is the store type, `$db` its
@@ -172,32 +203,10 @@ macro_rules! ingest_sql {
             .bind(rec.measured_at)
             .execute(&mut **tx)
             .await?;
-            sqlx::query(
-                "INSERT INTO diagnoses (id, record_id, machine_id, created_at, ea_estimate, \
-                 ea_lower, ea_upper, alert_level, motion_state, body, spectrum, has_wear, \
-                 novelty_score, novelty_threshold, channel, measured_at, evidence) \
-                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, $16, \
-                 $17)",
-            )
-            .bind(&d.id)
-            .bind(&d.record_id)
-            .bind(&d.machine_id)
-            .bind(d.created_at)
-            .bind(d.ea_estimate)
-            .bind(d.ea_lower)
-            .bind(d.ea_upper)
-            .bind(d.alert_level.as_str())
-            .bind(&d.motion_state)
-            .bind(&d.body)
-            .bind(&d.spectrum)
-            .bind(d.has_wear as i64)
-            .bind(d.novelty_score)
-            .bind(d.novelty_threshold)
-            .bind(&d.channel)
-            .bind(d.measured_at)
-            .bind(&d.evidence)
-            .execute(&mut **tx)
-            .await?;
+            insert_diagnosis(tx, d).await?;
+            if let Some(speed) = &ing.table_speed {
+                super::extensions::add_table_speed_in(tx, speed, rec.received_at).await?;
+            }
             sqlx::query(
                 "UPDATE machines SET updated_at = $2, record_count = record_count + 1, \
                  last_diagnosis_id = $3, alert_level = $4, \
@@ -221,6 +230,92 @@ macro_rules! ingest_sql {
                 QueuedEvent::new(new_id(), Event::DiagnosisCreated { diagnosis }),
             );
             queue_events(tx, &events, rec.received_at).await
+        }
+
+        /// The diagnosis's row, inside the caller's transaction.
+        async fn insert_diagnosis(
+            tx: &mut sqlx::Transaction<'_, $db>,
+            d: &DiagnosisRow,
+        ) -> StoreResult<()> {
+            sqlx::query(
+                "INSERT INTO diagnoses (id, record_id, machine_id, created_at, ea_estimate, \
+                 ea_lower, ea_upper, alert_level, motion_state, body, spectrum, has_wear, \
+                 novelty_score, novelty_threshold, channel, measured_at, evidence, \
+                 wear_withheld, reread_status, reread_request, replaces) \
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, $16, \
+                 $17, $18, $19, $20, $21)",
+            )
+            .bind(&d.id)
+            .bind(&d.record_id)
+            .bind(&d.machine_id)
+            .bind(d.created_at)
+            .bind(d.ea_estimate)
+            .bind(d.ea_lower)
+            .bind(d.ea_upper)
+            .bind(d.alert_level.as_str())
+            .bind(&d.motion_state)
+            .bind(&d.body)
+            .bind(&d.spectrum)
+            .bind(d.has_wear as i64)
+            .bind(d.novelty_score)
+            .bind(d.novelty_threshold)
+            .bind(&d.channel)
+            .bind(d.measured_at)
+            .bind(&d.evidence)
+            .bind(&d.wear_withheld)
+            .bind(&d.reread_status)
+            .bind(&d.reread_request)
+            .bind(&d.replaces)
+            .execute(&mut **tx)
+            .await?;
+            Ok(())
+        }
+
+        /// [`IngestStore::store_reread`]'s writes inside its transaction; `false` when the
+        /// diagnosis it replaces is no longer pending.
+        async fn reread_in(tx: &mut sqlx::Transaction<'_, $db>, r: &Reread) -> StoreResult<bool> {
+            let d = &r.diagnosis;
+            let old = d.replaces.as_deref().unwrap_or_default();
+            let claimed = sqlx::query(
+                "UPDATE diagnoses SET reread_status = 'done', reread_request = NULL \
+                 WHERE id = $1 AND machine_id = $2 AND reread_status = 'pending'",
+            )
+            .bind(old)
+            .bind(&d.machine_id)
+            .execute(&mut **tx)
+            .await?;
+            if claimed.rows_affected() != 1 {
+                return Ok(false);
+            }
+            insert_diagnosis(tx, d).await?;
+            let baseline: Option<i64> = sqlx::query(
+                "UPDATE records SET features = $2 WHERE id = $1 RETURNING baseline",
+            )
+            .bind(&d.record_id)
+            .bind(&r.features)
+            .fetch_optional(&mut **tx)
+            .await?
+            .map(|row| row.try_get("baseline"))
+            .transpose()?;
+            sqlx::query(
+                "UPDATE machines SET baseline_version = baseline_version + $3, \
+                 last_diagnosis_id = CASE WHEN last_diagnosis_id = $4 THEN $2 \
+                 ELSE last_diagnosis_id END WHERE id = $1",
+            )
+            .bind(&d.machine_id)
+            .bind(&d.id)
+            .bind(baseline.unwrap_or(0).min(1))
+            .bind(old)
+            .execute(&mut **tx)
+            .await?;
+            let event = QueuedEvent::new(
+                new_id(),
+                Event::DiagnosisCreated {
+                    diagnosis: $crate::ingest::diagnosis_event(d, &r.event_extras),
+                },
+            );
+            queue_events(tx, &[event], d.created_at).await?;
+            Ok(true)
         }
 
         /// The machine's alert level before this record, taking the machine's row lock. A
@@ -335,6 +430,28 @@ macro_rules! ingest_sql {
                         .collect();
                 }
                 out
+            }
+
+            async fn store_reread(&self, r: &Reread) -> StoreResult<bool> {
+                let mut tx = self.pool.begin().await?;
+                if !reread_in(&mut tx, r).await? {
+                    tx.rollback().await?;
+                    return Ok(false);
+                }
+                tx.commit().await?;
+                Ok(true)
+            }
+
+            async fn mark_reread(&self, diagnosis_id: &str, status: &str) -> StoreResult<()> {
+                sqlx::query(
+                    "UPDATE diagnoses SET reread_status = $2, reread_request = NULL \
+                     WHERE id = $1 AND reread_status = 'pending'",
+                )
+                .bind(diagnosis_id)
+                .bind(status)
+                .execute(&self.pool)
+                .await?;
+                Ok(())
             }
         }
     };

@@ -8,8 +8,9 @@
 //! [`Store`] is the sum of one trait per resource, each in its own module with its row types and
 //! its SQL: [`keys`], [`ingest`] (the record path's writes and idempotent answers),
 //! [`diagnoses`], [`machines`], [`webhooks`] (subscriptions and deliveries), [`retention`]
-//! (purges), [`calibration`], [`gearboxes`] (descriptions and their table jobs) and
-//! [`baselines`], [`alerts`] (alert episodes and their audit trail). Both backends run the same SQL text (`$1`-style parameters work on both): each
+//! (purges), [`calibration`], [`gearboxes`] (descriptions and their table jobs),
+//! [`extensions`] (what a table must cover and its extensions), [`physics`] (machines' own
+//! models), [`baselines`] and [`alerts`] (alert episodes and their audit trail). Both backends run the same SQL text (`$1`-style parameters work on both): each
 //! resource module has one small macro (`keys_sql!`, …) that the backend modules instantiate
 //! with their own pool type, with per-backend migrations under `migrations/{sqlite,postgres}`;
 //! the integration tests run the same API tests against both. The only differences live in the
@@ -74,6 +75,12 @@ macro_rules! backend {
         mod baselines {
             $crate::baselines::baselines_sql!($store, $db);
         }
+        mod extensions {
+            $crate::extensions::extensions_sql!($store, $db);
+        }
+        mod physics {
+            $crate::physics::physics_sql!($store, $db);
+        }
     };
 }
 pub(crate) use backend;
@@ -84,10 +91,12 @@ pub mod baselines;
 pub mod calibration;
 pub mod diagnoses;
 pub mod events;
+pub mod extensions;
 pub mod gearboxes;
 pub mod ingest;
 pub mod keys;
 pub mod machines;
+pub mod physics;
 pub mod postgres;
 pub mod queue;
 pub mod retention;
@@ -100,12 +109,14 @@ pub use alerts::{
 };
 pub use baselines::{BaselineRecord, BaselineStore};
 pub use calibration::{CalibrationRow, CalibrationStore};
-pub use diagnoses::{DiagnosisRow, DiagnosisStore};
+pub use diagnoses::{DiagnosisRow, DiagnosisStore, PendingReread};
 pub use events::{DiagnosisEvent, Event, QueuedEvent};
-pub use gearboxes::{GearboxRow, GearboxStore, PutOutcome};
-pub use ingest::{IdemRow, Ingest, IngestStore, NewRecord};
+pub use extensions::{ConfiguredSpeeds, TableExtensionStore, TableSpeed};
+pub use gearboxes::{Extension, GearboxRow, GearboxStore, PutOutcome, TableText};
+pub use ingest::{IdemRow, Ingest, IngestStore, NewRecord, Reread};
 pub use keys::{KeyRow, KeyStore};
 pub use machines::{MachineConfig, MachineDeletion, MachineRow, MachineStore};
+pub use physics::{PhysicsKey, PhysicsOutcome, PhysicsRow, PhysicsStore};
 pub use retention::RetentionStore;
 pub use webhooks::{AttemptRow, DeliveryRow, Outcome, WebhookRow, WebhookStore};
 
@@ -195,6 +206,8 @@ pub trait Store:
     + CalibrationStore
     + GearboxStore
     + BaselineStore
+    + TableExtensionStore
+    + PhysicsStore
     + Send
     + Sync
     + 'static

@@ -35,6 +35,9 @@ pub struct MachineRow {
     /// Its ISO 20816-3 group (1 or 2) and support (`rigid` or `flexible`), both or neither.
     pub iso_group: Option<i64>,
     pub iso_support: Option<String>,
+    /// Its declared range of input-shaft rates `(lo, hi)` Hz: part of what its gearbox's
+    /// table must cover.
+    pub speed_range_hz: Option<(f64, f64)>,
 }
 
 /// What `PUT /v1/machines/{id}` sets.
@@ -51,6 +54,8 @@ pub struct MachineConfig {
     pub channel_units: Option<String>,
     pub iso_group: Option<i64>,
     pub iso_support: Option<String>,
+    /// The declared range of input-shaft rates `(lo, hi)` Hz (checked by the caller).
+    pub speed_range_hz: Option<(f64, f64)>,
 }
 
 /// What [`MachineStore::delete_machine`] took away.
@@ -115,6 +120,9 @@ macro_rules! machines_sql {
                 channel_units: r.try_get("channel_units")?,
                 iso_group: r.try_get("iso_group")?,
                 iso_support: r.try_get("iso_support")?,
+                speed_range_hz: r
+                    .try_get::<Option<f64>, _>("speed_lo_hz")?
+                    .zip(r.try_get::<Option<f64>, _>("speed_hi_hz")?),
             })
         }
 
@@ -144,8 +152,8 @@ macro_rules! machines_sql {
                 let ins = sqlx::query(
                     "INSERT INTO machines (id, created_at, updated_at, gearbox_id, \
                      input_shaft_hz, channels, tacho_channel, tacho_ppr, channel_units, \
-                     iso_group, iso_support, registered_at) \
-                     VALUES ($1, $2, $2, $3, $4, $5, $6, $7, $8, $9, $10, $2) \
+                     iso_group, iso_support, registered_at, speed_lo_hz, speed_hi_hz) \
+                     VALUES ($1, $2, $2, $3, $4, $5, $6, $7, $8, $9, $10, $2, $11, $12) \
                      ON CONFLICT (id) DO NOTHING",
                 )
                 .bind(&m.id)
@@ -158,6 +166,8 @@ macro_rules! machines_sql {
                 .bind(&m.channel_units)
                 .bind(m.iso_group)
                 .bind(&m.iso_support)
+                .bind(m.speed_range_hz.map(|r| r.0))
+                .bind(m.speed_range_hz.map(|r| r.1))
                 .execute(&mut *tx)
                 .await?;
                 let created = ins.rows_affected() == 1;
@@ -166,7 +176,8 @@ macro_rules! machines_sql {
                         "UPDATE machines SET gearbox_id = $2, input_shaft_hz = $3, \
                          channels = $4, updated_at = $5, tacho_channel = $6, tacho_ppr = $7, \
                          channel_units = $8, iso_group = $9, iso_support = $10, \
-                         registered_at = COALESCE(registered_at, $5) WHERE id = $1",
+                         registered_at = COALESCE(registered_at, $5), speed_lo_hz = $11, \
+                         speed_hi_hz = $12 WHERE id = $1",
                     )
                     .bind(&m.id)
                     .bind(&m.gearbox_id)
@@ -178,6 +189,8 @@ macro_rules! machines_sql {
                     .bind(&m.channel_units)
                     .bind(m.iso_group)
                     .bind(&m.iso_support)
+                    .bind(m.speed_range_hz.map(|r| r.0))
+                    .bind(m.speed_range_hz.map(|r| r.1))
                     .execute(&mut *tx)
                     .await?;
                 }
@@ -236,6 +249,10 @@ macro_rules! machines_sql {
                     .execute(&mut *tx)
                     .await?;
                 deleted("alert_trackers WHERE machine_id = $1")
+                    .execute(&mut *tx)
+                    .await?;
+                // Its own model (physics and table) too.
+                deleted("machine_physics WHERE machine_id = $1")
                     .execute(&mut *tx)
                     .await?;
                 deleted("machines WHERE id = $1").execute(&mut *tx).await?;

@@ -5,20 +5,28 @@
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
+use serde::{Deserialize, Serialize};
+
 use super::idempotency::Idempotency;
 use super::rows::{Ids, answer, diagnosis_row, event_extras, measured_at, record_row};
 use crate::assessment::{
-    Assessment, Baselines, Machine, MachineCalibration, RecordFacts, TableDiagnoser, TachoChannel,
-    Thresholds, assess, reads_as_described,
+    Assessment, Baselines, Machine, MachineCalibration, OwnModel, RecordFacts, TableDiagnoser,
+    TachoChannel, Thresholds, assess, reads_as_described,
 };
+use crate::condition::Load;
+use crate::diagnosis::WithheldReason;
 use crate::gearbox::Gearbox;
 use crate::service::AppState;
 use crate::service::error::{ApiError, ApiResult, problem_from_error};
 use crate::service::machines::{DEFAULT_TACHO_CHANNEL, MachineContext};
 use crate::service::metrics::StageClock;
 use crate::service::spectrum::{PlotSpectrum, plot_from_spectrum, plot_spectrum};
+use crate::service::tables;
 use crate::service::wire::{BodyFormat, Decoded, RecordQuery, decode};
-use crate::store::{AlertInput, IdemRow, Ingest, MachineRow, StoreError, new_id, now_ms};
+use crate::store::{
+    AlertInput, DiagnosisRow, GearboxRow, IdemRow, Ingest, MachineRow, StoreError, TableSpeed,
+    new_id, now_ms,
+};
 use crate::units::MachineUnits;
 
 /// A decoded record with its machine and what came with it: what [`prepare`] hands to
@@ -92,8 +100,16 @@ pub async fn accept(
         warnings,
     } = prepared;
     let declared_healthy = request.declared_healthy;
+    let again = request.reread_request(&dec);
     let job = request.load(app, machine_id, machine, dec).await?;
-    let (dec, mut assessment, spectrum, job_clock) = tokio::task::spawn_blocking(move || job.run())
+    let Assessed {
+        dec,
+        mut assessment,
+        spectrum,
+        clock: job_clock,
+        gearbox_row,
+        gearbox,
+    } = tokio::task::spawn_blocking(move || job.run())
         .await
         .map_err(|e| ApiError::internal(format!("the diagnosis task failed: {e}")))?
         .map_err(|e| problem_from_error(&e))?;
@@ -102,6 +118,7 @@ pub async fn accept(
     }
     clock.absorb(job_clock);
     clock.skip();
+    let table_speed = table_miss(app, machine_id, &gearbox_row, &gearbox, &mut assessment).await?;
 
     let ids = Ids {
         now: now_ms(),
@@ -124,13 +141,17 @@ pub async fn accept(
             idem,
             declared_healthy,
         ),
-        diagnosis: diagnosis_row(
-            &assessment,
-            body,
-            spectrum.as_ref(),
-            &ids,
-            machine_id,
-            measured_at(&dec, &ids),
+        diagnosis: with_reread(
+            diagnosis_row(
+                &assessment,
+                body,
+                spectrum.as_ref(),
+                &ids,
+                machine_id,
+                measured_at(&dec, &ids),
+            ),
+            &again,
+            !app.settings.raw_retention.is_zero(),
         ),
         idempotency: idem.row(&response_text),
         event_extras: event_extras(&assessment),
@@ -140,6 +161,7 @@ pub async fn accept(
             measured_at: measured_at(&dec, &ids),
             policy: app.settings.alerts,
         }),
+        table_speed,
     };
     // The webhook payloads carry the machine's wear trend with this record in it: a read of
     // the history and a bootstrapped fit (≈ 10 ms of CPU at 200 points), so only when a
@@ -161,6 +183,55 @@ pub async fn accept(
         response_text,
         diagnosis_id: ids.diagnosis_id,
     })
+}
+
+/// A record's `table-in-progress` miss as the service answers it ([`crate::service::tables`]):
+/// its speed to store with it (the table's extension queued with it), or the answer re-stated
+/// `outside-table` when the table is not extended to it.
+pub(super) async fn table_miss(
+    app: &AppState,
+    machine_id: &str,
+    row: &GearboxRow,
+    gb: &Gearbox,
+    a: &mut Assessment,
+) -> ApiResult<Option<TableSpeed>> {
+    let Some(hz) = tables::miss_hz(a).filter(|_| !row.builtin) else {
+        return Ok(None);
+    };
+    let admitted = tables::admit(app, machine_id, row, gb, hz).await?;
+    let keeps = !app.settings.raw_retention.is_zero();
+    tables::answer_miss(a, row, gb, &admitted, keeps);
+    if let Err(why) = &admitted {
+        tracing::info!(machine = machine_id, gearbox = %row.id, hz, why = %why, "a record's speed is not added to its table");
+    }
+    Ok(admitted.ok())
+}
+
+/// What a record came with besides its samples, kept with a diagnosis whose record is read
+/// again when its table covers it ([`super::reread`]).
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct RereadRequest {
+    /// `?channel=`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub channel: Option<String>,
+    /// Posted with `?baseline=true`.
+    #[serde(default)]
+    pub declared_healthy: bool,
+    /// The tachometer's pulses per revolution the record was read with.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tacho_ppr: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub load: Option<Load>,
+}
+
+/// `d` with its re-read state: a `table-in-progress` diagnosis is `pending` with the request
+/// it is read again with (`unavailable` when no raw samples are kept).
+pub(super) fn with_reread(mut d: DiagnosisRow, again: &RereadRequest, keeps: bool) -> DiagnosisRow {
+    if d.wear_withheld.as_deref() == Some(WithheldReason::TableInProgress.as_str()) {
+        d.reread_status = Some(if keeps { "pending" } else { "unavailable" }.into());
+        d.reread_request = keeps.then(|| serde_json::to_string(again).unwrap_or_default());
+    }
+    d
 }
 
 /// The store calls of one accepted record: its rows in one transaction (the group-commit
@@ -234,17 +305,17 @@ pub(super) fn tacho_of(
 }
 
 /// What the request says about the record besides its samples.
-struct RecordRequest {
+pub(super) struct RecordRequest {
     /// `?channel=`.
-    channel: Option<String>,
+    pub channel: Option<String>,
     /// Posted with `?baseline=true`.
-    declared_healthy: bool,
-    tacho: Option<TachoChannel>,
+    pub declared_healthy: bool,
+    pub tacho: Option<TachoChannel>,
 }
 
 /// Everything the blocking part of an ingest needs: the decoded record, the chosen channels
 /// and the machine's context (gearbox, table, baseline, calibration).
-struct AssessJob {
+pub(super) struct AssessJob {
     dec: Decoded,
     chosen: Vec<usize>,
     ctx: MachineContext,
@@ -256,14 +327,35 @@ struct AssessJob {
     tacho: Option<TachoChannel>,
     /// The machine's declared units and ISO class.
     units: MachineUnits,
+    /// The machine's own model, when one is ready for its baseline.
+    own: Option<Arc<OwnModel>>,
 }
 
-type JobResult = (Decoded, Assessment, Option<PlotSpectrum>, StageClock);
+/// What [`AssessJob::run`] gives back: the record, its assessment, the spectrum plot, the
+/// stages' clock, and the gearbox it was assessed with.
+pub(super) struct Assessed {
+    pub dec: Decoded,
+    pub assessment: Assessment,
+    pub spectrum: Option<PlotSpectrum>,
+    pub clock: StageClock,
+    pub gearbox_row: GearboxRow,
+    pub gearbox: Arc<Gearbox>,
+}
 
 impl RecordRequest {
+    /// What a re-read of the record needs of this request (and of the record's load).
+    fn reread_request(&self, dec: &Decoded) -> RereadRequest {
+        RereadRequest {
+            channel: self.channel.clone(),
+            declared_healthy: self.declared_healthy,
+            tacho_ppr: self.tacho.as_ref().map(|t| t.pulses_per_rev),
+            load: dec.load.clone(),
+        }
+    }
+
     /// The machine's gearbox (and its table, when ready), baseline and calibration, and the
     /// channels to assess (never the tachometer's).
-    async fn load(
+    pub(super) async fn load(
         self,
         app: &AppState,
         machine_id: &str,
@@ -293,7 +385,15 @@ impl RecordRequest {
             .get_calibration(machine_id)
             .await?
             .map(|c| calibration_of(&c));
+        let own = match ctx.diagnoser {
+            Some(_) => {
+                crate::service::physics::own_model(app, ctx.machine.as_ref(), &ctx.gearbox_row.hash)
+                    .await?
+            }
+            None => None,
+        };
         Ok(AssessJob {
+            own,
             dec,
             chosen,
             ctx,
@@ -309,7 +409,7 @@ impl RecordRequest {
 
 impl AssessJob {
     /// The assessment (timed by stage) and the spectrum plot of the deciding channel.
-    fn run(mut self) -> crate::Result<JobResult> {
+    pub(super) fn run(mut self) -> crate::Result<Assessed> {
         let mut clock = StageClock::new();
         let facts = RecordFacts {
             sample_rate_hz: self.dec.sample_rate_hz,
@@ -333,8 +433,10 @@ impl AssessJob {
             baseline_counts: &self.baselines.counts,
             calibration: self.calibration.as_ref(),
             paths: &self.baselines.paths,
-            own_model: None,
-            extends_tables: false,
+            own_model: self.own.as_deref(),
+            // A described gearbox's table is extended to the speeds its records run at (the
+            // built-in rig's is the served file).
+            extends_tables: !ctx.gearbox_row.builtin,
             thresholds: self.thresholds,
             units: std::mem::take(&mut self.units),
         };
@@ -348,7 +450,14 @@ impl AssessJob {
         let samples = &self.dec.channels[self.chosen[a.deciding]].1;
         let spectrum = plot(&a, samples, &facts, &ctx.gearbox, ctx.input_shaft_hz());
         clock.lap("plot");
-        Ok((self.dec, a, spectrum, clock))
+        Ok(Assessed {
+            dec: self.dec,
+            assessment: a,
+            spectrum,
+            clock,
+            gearbox_row: self.ctx.gearbox_row,
+            gearbox: self.ctx.gearbox,
+        })
     }
 }
 

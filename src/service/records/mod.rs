@@ -4,7 +4,8 @@
 //!
 //! The handler is here; [`accept`] holds the steps every record source shares (the machine,
 //! the decoded record, the assessment, the store), `rows` the rows and answer it writes,
-//! [`idempotency`] the key and the replay.
+//! [`idempotency`] the key and the replay, [`reread`] a stored record read again once its
+//! gearbox's table covers it.
 //!
 //! The record's operating state: its load from `?load=` or the JSON body's `load`; its speed
 //! counted from its tachometer channel — the machine's `tacho_channel`, else a channel named
@@ -12,6 +13,7 @@
 
 mod accept;
 mod idempotency;
+pub mod reread;
 mod rows;
 
 use axum::body::Body;

@@ -14,7 +14,7 @@ use crate::time::parse_rfc3339;
 /// What each webhook payload of the record carries besides the diagnosis row's members: the
 /// deciding channel's `findings` (strongest first) and the record's `operating_state`, as
 /// answered (and, added by the caller, the machine's `trend_summary`).
-pub(super) fn event_extras(a: &Assessment) -> serde_json::Map<String, Value> {
+pub(crate) fn event_extras(a: &Assessment) -> serde_json::Map<String, Value> {
     let mut m = serde_json::Map::new();
     m.insert(
         "findings".into(),
@@ -28,7 +28,7 @@ pub(super) fn event_extras(a: &Assessment) -> serde_json::Map<String, Value> {
 }
 
 /// The ids and time the service gives an accepted record.
-pub(super) struct Ids {
+pub(crate) struct Ids {
     pub now: i64,
     pub record_id: String,
     pub diagnosis_id: String,
@@ -101,7 +101,7 @@ pub(super) fn record_row(
 
 /// The diagnosis's row: the assessment as answered (`body`), the wear its trend follows, the
 /// spectrum plot.
-pub(super) fn diagnosis_row(
+pub(crate) fn diagnosis_row(
     a: &Assessment,
     body: String,
     spectrum: Option<&PlotSpectrum>,
@@ -137,6 +137,10 @@ pub(super) fn diagnosis_row(
         novelty_threshold: decide.novelty.as_ref().map(|n| n.threshold),
         channel: Some(decide.name.clone()),
         measured_at,
+        wear_withheld: crate::service::tables::withheld(a).map(|w| w.as_str().to_string()),
+        reread_status: None,
+        reread_request: None,
+        replaces: None,
     }
 }
 
