@@ -26,6 +26,7 @@ pub mod alerts;
 pub mod auth;
 pub mod calibration;
 pub mod cli;
+pub mod context;
 pub mod dashboard;
 pub mod error;
 pub mod evidence;
@@ -37,6 +38,7 @@ pub mod machines;
 pub mod metrics;
 pub mod mqtt;
 pub mod physics;
+pub mod physics_queue;
 pub mod read;
 pub mod records;
 pub mod signatures;
@@ -73,11 +75,13 @@ pub struct Inner {
     /// The built-in gearbox (the paper's rig), resolved once.
     pub builtin_gearbox: Arc<crate::gearbox::Gearbox>,
     /// The machines' fitted baselines, refitted when a baseline changes.
-    pub baselines: machines::BaselineCache,
+    pub baselines: context::BaselineCache,
     /// The machines' own models this replica loaded.
     pub physics: physics::PhysicsCache,
     /// Wakes the own-model worker (a job was queued).
     pub physics_wake: Notify,
+    /// Wakes the re-read worker (a table was stored: records may wait for it).
+    pub reread_wake: Notify,
 }
 
 impl std::ops::Deref for AppState {
@@ -113,9 +117,10 @@ impl AppState {
             job_wake: Notify::new(),
             tables: gearboxes::Tables::default(),
             builtin_gearbox: Arc::new(crate::gearbox::Gearbox::paper_rig()),
-            baselines: machines::BaselineCache::default(),
+            baselines: context::BaselineCache::default(),
             physics: physics::PhysicsCache::default(),
             physics_wake: Notify::new(),
+            reread_wake: Notify::new(),
         }))
     }
 }
@@ -328,6 +333,7 @@ pub async fn serve(
     let worker = tokio::spawn(webhooks::worker(state.clone(), stop_rx.clone()));
     let jobs = tokio::spawn(tables::jobs::worker(state.clone(), stop_rx.clone()));
     let own_models = tokio::spawn(physics::worker(state.clone(), stop_rx.clone()));
+    let rereads = tokio::spawn(records::reread::worker(state.clone(), stop_rx.clone()));
     let mqtt = state
         .settings
         .mqtt
@@ -342,6 +348,7 @@ pub async fn serve(
     let _ = worker.await;
     let _ = jobs.await;
     let _ = own_models.await;
+    let _ = rereads.await;
     let _ = retention.await;
     if let Some(m) = mqtt {
         let _ = m.await;

@@ -2,8 +2,10 @@
 //! ([`MachinePhysics::fit`]) and its own table, computed by a background job, read by its
 //! records once ready.
 //!
-//! * **When.** A machine whose baseline has at least [`MIN_RECORDS`] records carrying the
-//!   table's line ratios at [`MIN_SPEEDS`] speeds or more, on one channel, while its gearbox's
+//! * **When** ([`super::physics_queue`]). A machine whose baseline has at least
+//!   [`MIN_RECORDS`](crate::diagnosis::machine_physics::MIN_RECORDS) records carrying the
+//!   table's line ratios at [`MIN_SPEEDS`](crate::diagnosis::machine_physics::MIN_SPEEDS)
+//!   speeds or more, on one channel, while its gearbox's
 //!   table is ready, gets a job queued for its machine row, gearbox description and
 //!   `baseline_version` ([`PhysicsKey`]); a change of any of them queues it again (the result
 //!   before is dropped). A job waits until its baseline has been still for [`SETTLE_MS`] (a
@@ -30,25 +32,19 @@ use tokio::sync::watch;
 
 use super::AppState;
 use super::error::{ApiError, ApiResult};
-use super::gearboxes::BUILTIN_ID;
+use super::physics_queue::{fittable, healthy_ratios, key_of, queue_if_fittable};
 use super::tables::jobs::{IDLE_POLL, LEASE_MS, LeaseOf, Ran, leased, partial, worker_id};
 use crate::assessment::{OwnModel, TableDiagnoser};
 use crate::diagnosis::DiagnoseOptions;
 use crate::diagnosis::machine_path::LineRatios;
-use crate::diagnosis::machine_physics::{
-    MIN_RECORDS, MIN_SPEEDS, MachinePhysics, PhysicsFitOptions,
-};
+use crate::diagnosis::machine_physics::{MachinePhysics, PhysicsFitOptions};
 use crate::gearbox::Gearbox;
-use crate::novelty::RecordFeatures;
 use crate::signature::SignatureTable;
 use crate::signature::precompute::precompute;
 use crate::store::{MachineRow, PhysicsKey, PhysicsOutcome, PhysicsRow, now_ms};
 
 /// How long a queued job waits for its machine's baseline to be still.
 pub const SETTLE_MS: i64 = 3_000;
-/// Healthy records within this relative f1 of each other are one speed (the fit's own rule).
-const SAME_SPEED: f64 = 0.03;
-
 /// The own models this replica loaded, by machine, with the key they were made for.
 #[derive(Default)]
 pub struct PhysicsCache {
@@ -66,79 +62,6 @@ impl PhysicsCache {
     fn put(&self, key: PhysicsKey, o: Arc<OwnModel>) {
         let mut m = self.loaded.lock().unwrap_or_else(|p| p.into_inner());
         m.insert(key.machine_id.clone(), (key, o));
-    }
-}
-
-/// The key of machine `m`'s own model on gearbox `gearbox_id` with description `hash`.
-pub fn key_of(m: &MachineRow, hash: &str) -> PhysicsKey {
-    PhysicsKey {
-        machine_id: m.id.clone(),
-        machine_created_at: m.created_at,
-        gearbox_id: m
-            .gearbox_id
-            .clone()
-            .unwrap_or_else(|| BUILTIN_ID.to_string()),
-        gearbox_hash: hash.to_string(),
-        baseline_version: m.baseline_version,
-    }
-}
-
-/// The line ratios per channel of baseline records' features (those that carry them).
-pub fn healthy_ratios(
-    per: &BTreeMap<String, Vec<RecordFeatures>>,
-) -> BTreeMap<String, Vec<LineRatios>> {
-    per.iter()
-        .map(|(c, fs)| {
-            (
-                c.clone(),
-                fs.iter().filter_map(|f| f.ratios.clone()).collect(),
-            )
-        })
-        .filter(|(_, r): &(String, Vec<LineRatios>)| !r.is_empty())
-        .collect()
-}
-
-/// Whether some channel has enough records and speeds for a fit.
-fn fittable(healthy: &BTreeMap<String, Vec<LineRatios>>) -> bool {
-    healthy.values().any(|rs| {
-        let mut f: Vec<f64> = rs.iter().map(|r| r.f1_hz).collect();
-        f.sort_by(f64::total_cmp);
-        let mut groups: Vec<f64> = Vec::new();
-        for x in f {
-            if groups.last().is_none_or(|&c| x / c - 1.0 > SAME_SPEED) {
-                groups.push(x);
-            }
-        }
-        rs.len() >= MIN_RECORDS && groups.len() >= MIN_SPEEDS
-    })
-}
-
-/// After machine `m`'s baselines were fitted from `per` (its baseline changed, or this replica
-/// had not fitted them): queue its own model when its baseline is fittable and its gearbox's
-/// table is ready (`table_ready`). Errors are logged: the next fit tries again.
-pub async fn queue_if_fittable(
-    app: &AppState,
-    m: &MachineRow,
-    hash: &str,
-    per: &BTreeMap<String, Vec<RecordFeatures>>,
-    table_ready: bool,
-) {
-    if !table_ready || !fittable(&healthy_ratios(per)) {
-        return;
-    }
-    match app
-        .store
-        .queue_machine_physics(&key_of(m, hash), now_ms())
-        .await
-    {
-        Ok(true) => {
-            tracing::info!(machine = %m.id, version = m.baseline_version, "the machine's own model is queued");
-            app.physics_wake.notify_one();
-        }
-        Ok(false) => {}
-        Err(e) => {
-            tracing::warn!(machine = %m.id, error = %e, "the machine's own model was not queued")
-        }
     }
 }
 
@@ -277,9 +200,9 @@ async fn inputs(app: &AppState, k: &PhysicsKey) -> ApiResult<Result<Inputs, NotR
     let Some(m) = app.store.get_machine(&k.machine_id).await? else {
         return Ok(Err(NotRun::Fails("the machine is gone".into())));
     };
-    let ctx = super::machines::context_of(app, &k.machine_id, Some(m.clone())).await?;
+    let ctx = super::context::context_of(app, &k.machine_id, Some(m.clone())).await?;
     let hash = ctx.gearbox_row.hash.clone();
-    let per = super::machines::baseline_features(app, &k.machine_id, &hash).await?;
+    let per = super::context::baseline_features(app, &k.machine_id, &hash).await?;
     if key_of(&m, &hash) != *k {
         // (A baseline posted record by record ends with a job one version behind: the last
         // record's own mark comes after the fit it triggered.)

@@ -17,8 +17,9 @@ use crate::condition::Load;
 use crate::diagnosis::WithheldReason;
 use crate::gearbox::Gearbox;
 use crate::service::AppState;
+use crate::service::context::MachineContext;
 use crate::service::error::{ApiError, ApiResult, problem_from_error};
-use crate::service::machines::{DEFAULT_TACHO_CHANNEL, MachineContext};
+use crate::service::machines::DEFAULT_TACHO_CHANNEL;
 use crate::service::metrics::StageClock;
 use crate::service::spectrum::{PlotSpectrum, plot_from_spectrum, plot_spectrum};
 use crate::service::tables;
@@ -362,7 +363,7 @@ impl RecordRequest {
         machine: Option<MachineRow>,
         dec: Decoded,
     ) -> ApiResult<AssessJob> {
-        let ctx = crate::service::machines::context_of(app, machine_id, machine).await?;
+        let ctx = crate::service::context::context_of(app, machine_id, machine).await?;
         let tacho_index = self
             .tacho
             .as_ref()
@@ -373,7 +374,7 @@ impl RecordRequest {
             tacho_index,
         )?;
         let units = crate::service::units::machine_units(ctx.machine.as_ref())?;
-        let baselines = crate::service::machines::baselines(
+        let baselines = crate::service::context::baselines(
             app,
             ctx.machine.as_ref(),
             &ctx.gearbox_row.hash,

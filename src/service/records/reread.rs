@@ -40,6 +40,30 @@ pub enum Outcome {
     Given,
 }
 
+/// The re-read worker: whenever a table job stores a table (`reread_wake`), and at every idle
+/// poll (records a stopped replica left waiting for a table that is ready now), the pending
+/// records of every gearbox whose table covers them are read again.
+pub async fn worker(app: AppState, mut stop: tokio::sync::watch::Receiver<bool>) {
+    loop {
+        if *stop.borrow() {
+            break;
+        }
+        match app.store.reread_gearboxes().await {
+            Ok(gearboxes) => {
+                for g in gearboxes {
+                    reread_gearbox(&app, &g).await;
+                }
+            }
+            Err(e) => tracing::warn!(error = %e, "re-reads: store unavailable"),
+        }
+        tokio::select! {
+            _ = tokio::time::sleep(crate::service::tables::jobs::IDLE_POLL) => {}
+            _ = app.reread_wake.notified() => {}
+            _ = stop.changed() => break,
+        }
+    }
+}
+
 /// Read again the pending records of the machines whose gearbox is `gearbox_id`; how many
 /// new diagnoses were stored. Errors are logged, never returned: a record left pending is
 /// taken at the worker's next idle poll.

@@ -9,7 +9,7 @@
 //! without one); an extension computes the columns the demand needs beyond the stored table's
 //! ([`crate::signature::coverage::extend`]), the stored table ready and in use meanwhile. After
 //! either, the replica that finished it checks the demand again (it may have grown while the
-//! job ran) and reads again the records that waited for the table ([`crate::service::records::reread`]). Idle,
+//! job ran) and wakes the re-read worker for the records that waited for the table ([`crate::service::records::reread`]). Idle,
 //! the worker also reads again the records a stopped replica left waiting.
 
 use std::sync::Arc;
@@ -169,10 +169,6 @@ async fn step(app: &AppState, me: &str, stop: &mut watch::Receiver<bool>) -> Sto
     }
     if let Some(job) = app.store.claim_extension(now_ms(), LEASE_MS, me).await? {
         return Ok(run_extension(app, me, job, stop).await);
-    }
-    // Records a stopped replica left waiting for a table that is ready now.
-    for g in app.store.reread_gearboxes().await? {
-        crate::service::records::reread::reread_gearbox(app, &g).await;
     }
     Ok(Step::Idle)
 }
@@ -412,5 +408,6 @@ async fn follow_up(app: &AppState, id: &str) {
         Ok(None) => return,
         Err(e) => tracing::warn!(gearbox = %id, error = %e, "table demand not checked"),
     }
-    crate::service::records::reread::reread_gearbox(app, id).await;
+    // The re-read worker reads again the records that waited for this table.
+    app.reread_wake.notify_one();
 }
