@@ -864,7 +864,7 @@ async fn dashboard_shows_the_fleet_by_severity_and_a_machine_from_the_url() {
         .script(
             "const m = {id: 'real', record_count: 3, gearbox: {status: 'ready'}, latest: {\
                created_at: '2026-11-23T08:00:00Z', wear_degree: null, motion_state: 'period-1', warnings: [], \
-               wear_note: 'no wear figure: the model does not fit this record', \
+               wear_note: 'no wear figure: the model does not fit this record', wear_withheld: 'poor-fit', \
                operating_state: {shaft_hz: 35.0012, source: 'tachometer', speed_variation: 0.002, load: 'low'}, \
                findings: [{kind: 'gear-local-damage', shaft: 'idler', strength: 12.5, \
                            summary: 'gear 24T (stage 2 pinion) on shaft `idler`: the envelope repeats at `idler`\\'s rate +42.6 dB', \

@@ -142,7 +142,7 @@ function renderChannels(l) {
     const n = c.novelty;
     h("td", {}, tr, n && num(n.score) ? n.score.toFixed(2) + " / " + fmt(n.threshold, 2) : "no baseline");
     const w = c.wear_degree;
-    h("td", {}, tr, w && num(w.estimate) ? w.estimate.toFixed(3) : c.fit && c.fit.inflated ? "no figure (poor fit)" : "–");
+    h("td", {}, tr, w && num(w.estimate) ? w.estimate.toFixed(3) : noWearText(c.wear_withheld, true) || "–");
     // The departures in words (`says`); a stored answer from before they were given: the feature's name.
     const top = n && Array.isArray(n.top_features) ? n.top_features.slice(0, 2).map((f) => f.says || f.name + " (" + fmt(f.z, 1) + " spreads)") : [];
     const why = h("td", { class: "muted why" }, tr);
@@ -205,7 +205,8 @@ function wearText(l, m) {
   if (!l) return "–";
   const w = l.wear_degree;
   if (w && num(w.estimate)) return w.estimate.toFixed(3);
-  if (l.wear_note) return noWearText(l.wear_note);
+  const why = noWearText(l.wear_withheld);
+  if (why) return why;
   const g = m.gearbox || {};
   if (g.status && g.status !== "ready") return "no wear figure (the gearbox's table is not ready)";
   return "no wear figure";

@@ -211,13 +211,19 @@ function tooltip(node, text) { el("title", {}, node, text); }
 const CHART = { W: 480, H: 240, pad: { l: 40, r: 10, t: 20, b: 34 } };
 
 /**
- * Why a diagnosis with a `wear_note` has no wear figure, in a few words: the record's change
- * is one part's (a gear, a shaft, a bearing), or the model does not fit it. `short` drops the
- * explanation (the fleet table's cell).
+ * Why a diagnosis has no wear figure, in a few words, from its typed reason `withheld`
+ * (`wear_withheld`: the API's codes, never its sentences). `short` drops the explanation
+ * (the fleet table's cell). `null` when the code is not given (an answer stored before codes).
  */
-function noWearText(wearNote, short) {
-  if (/ of this record's change is one part's/.test(wearNote)) {
-    return short ? "no wear figure (one part's change)" : "no wear figure (the change is one part's, not wear)";
-  }
-  return short ? "no wear figure (poor fit)" : "no wear figure (poor fit: the model does not fit this record)";
+const WITHHELD = {
+  "poor-fit": ["poor fit", "poor fit: the model does not fit this record"],
+  "one-part": ["one part's change", "the change is one part's, not wear"],
+  "outside-calibration": ["outside the calibration", "the record ran at a speed outside the machine's calibration"],
+  "table-in-progress": ["table in progress", "the table at this speed is being computed; the record is read again when it is ready"],
+  "outside-table": ["outside the table", "no table covers the record's speed"],
+};
+function noWearText(withheld, short) {
+  const w = WITHHELD[withheld];
+  if (!w) return null;
+  return "no wear figure (" + w[short ? 0 : 1] + ")";
 }

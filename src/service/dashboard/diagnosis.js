@@ -29,7 +29,7 @@ function renderRecord(r) {
   };
   const w = r.wear_degree;
   fact("Wear degree ea", w && num(w.estimate) ? w.estimate.toFixed(3) + " (90 % " + fmt(w.lower, 3) + " … " + fmt(w.upper, 3) + ")"
-    : d.wear_note ? noWearText(d.wear_note) : "no wear figure", "wear");
+    : noWearText(d.wear_withheld) || "no wear figure", "wear");
   const um = d.wear_degree_um;
   if (um && num(um.estimate)) fact("Wear", um.estimate.toFixed(1) + " µm (90 % " + fmt(um.lower, 1) + " … " + fmt(um.upper, 1) + ")", "wear-um");
   for (const p of figureParts(d).filter((p) => !p.cls.startsWith("wear"))) fact(p.cls.startsWith("velocity") ? "Velocity" : "Acceleration", p.text, p.cls);

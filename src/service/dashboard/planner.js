@@ -175,7 +175,7 @@ function fleetRow(tb, m, u, view) {
   const fig = h("td", { class: "figures" }, tr);
   const parts = figureParts(l, view && view.configuration);
   for (const p of parts) h("div", { class: p.cls, title: p.title }, fig, p.text);
-  if (!parts.length) h("span", { class: "muted" }, fig, l ? (l.wear_note ? noWearText(l.wear_note, true) : "no figure in units") : "no record yet");
+  if (!parts.length) h("span", { class: "muted" }, fig, l ? (noWearText(l.wear_withheld, true) || "no figure in units") : "no record yet");
   const verdict = verdictText(view);
   const tdv = h("td", { class: "verdict" + (u.projection ? " projected" : "") }, tr, verdict || "–");
   if (view && view.trend_summary && view.trend_summary.verdict) tdv.title = view.trend_summary.verdict;

@@ -223,6 +223,9 @@ pub struct ChannelSummary {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub wear_degree_um: Option<WearUm>,
     pub fit: Option<Fit>,
+    /// Why this channel has no wear figure, as a code, when it has none for a known reason.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub wear_withheld: Option<WithheldReason>,
     pub novelty: Option<Novelty>,
     pub findings: Vec<Finding>,
     /// In physical units, when the channel's unit is declared.
@@ -263,6 +266,10 @@ impl ChannelAssessment {
                 .map(|r| r.diagnosis.wear_degree.clone()),
             wear_degree_um: self.wear_um,
             fit: self.reading.as_ref().map(|r| r.diagnosis.fit.clone()),
+            wear_withheld: match &self.reading {
+                Some(r) => r.diagnosis.wear_withheld,
+                None => self.table_miss.as_ref().map(|m| m.reason),
+            },
             novelty: self.novelty.clone(),
             findings: self.findings.clone(),
             vibration: self.vibration.clone(),
