@@ -223,7 +223,7 @@ fn row(f: &File, a: &Assessment, seconds: f64) -> Row {
     let first_gear_shaft = a
         .findings
         .iter()
-        .find(|x| x.kind.starts_with("gear"))
+        .find(|x| x.kind.is_gear())
         .and_then(|x| x.shaft.clone());
     let score_ratio = a
         .deciding_channel()

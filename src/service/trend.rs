@@ -15,6 +15,7 @@ use super::auth::Caller;
 use super::error::{ApiError, ApiResult};
 use super::http::{check_machine_id, json_with_etag};
 use crate::assessment::Level;
+use crate::condition::FindingKind;
 use crate::store::{AlertRow, DiagnosisRow};
 use crate::time::rfc3339;
 use crate::trend::{self, Sample, Trend, TrendOptions};
@@ -31,7 +32,10 @@ const MS_PER_DAY: f64 = 86_400_000.0;
 enum Series {
     Wear,
     Novelty,
-    Finding { kind: String, shaft: Option<String> },
+    Finding {
+        kind: FindingKind,
+        shaft: Option<String>,
+    },
 }
 
 impl Series {
@@ -42,9 +46,24 @@ impl Series {
             f if f.starts_with("finding:") && f.len() > "finding:".len() && f.len() <= 200 => {
                 let name = &f["finding:".len()..];
                 let (kind, shaft) = match name.split_once('@') {
-                    Some((k, s)) => (k.to_string(), Some(s.to_string())),
-                    None => (name.to_string(), None),
+                    Some((k, s)) => (k, Some(s.to_string())),
+                    None => (name, None),
                 };
+                let kind = kind_of(kind).ok_or_else(|| {
+                    ApiError::bad_request(
+                        "invalid-query",
+                        "Invalid query parameter",
+                        format!(
+                            "`series=finding:<kind>` names no finding kind: `{kind}` (one of {})",
+                            KINDS
+                                .iter()
+                                .map(|k| format!("`{k}`"))
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                    )
+                    .with("parameter", "series")
+                })?;
                 Ok(Series::Finding { kind, shaft })
             }
             other => Err(ApiError::bad_request(
@@ -95,31 +114,91 @@ struct Point<'a> {
     novelty_threshold: Option<f64>,
 }
 
+/// Every finding kind, in the API's words.
+const KINDS: [FindingKind; 8] = [
+    FindingKind::GearLocalDamage,
+    FindingKind::GearEccentricity,
+    FindingKind::Shaft,
+    FindingKind::Bearing,
+    FindingKind::NonSynchronous,
+    FindingKind::MeshLines,
+    FindingKind::TransferPath,
+    FindingKind::Unexplained,
+];
+
+/// The finding kind the API writes as `word`.
+fn kind_of(word: &str) -> Option<FindingKind> {
+    KINDS.into_iter().find(|k| k.as_str() == word)
+}
+
+/// What a series reads of a stored diagnosis body (the assessment the service wrote): the
+/// deciding channel's view, and each channel's when the record had several.
+#[derive(Debug, Default, Deserialize)]
+struct StoredBody {
+    #[serde(flatten)]
+    view: ChannelView,
+    channel: Option<String>,
+    channels: Option<Vec<ChannelView>>,
+}
+
+/// One channel's wear, novelty and findings in a stored body.
+#[derive(Debug, Default, Deserialize)]
+struct ChannelView {
+    name: Option<String>,
+    wear_degree: Option<StoredWear>,
+    novelty: Option<StoredNovelty>,
+    #[serde(default)]
+    findings: Vec<StoredFinding>,
+}
+
+#[derive(Debug, Deserialize)]
+struct StoredWear {
+    estimate: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+struct StoredNovelty {
+    score: Option<f64>,
+    threshold: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+struct StoredFinding {
+    /// `None`: a kind this service no longer writes (a body stored by an older one).
+    #[serde(deserialize_with = "known_kind")]
+    kind: Option<FindingKind>,
+    shaft: Option<String>,
+    strength: Option<f64>,
+}
+
+fn known_kind<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<FindingKind>, D::Error> {
+    Ok(kind_of(&String::deserialize(d)?))
+}
+
 /// The part of a diagnosis body that describes `channel`: the `channels` entry of that name,
 /// or the body itself when its deciding channel is that one (a one-channel record).
-fn channel_view<'a>(body: &'a Value, channel: &str) -> Option<&'a Value> {
-    if let Some(cs) = body.get("channels").and_then(Value::as_array) {
-        return cs
-            .iter()
-            .find(|c| c.get("name").and_then(Value::as_str) == Some(channel));
+fn channel_view<'a>(body: &'a StoredBody, channel: &str) -> Option<&'a ChannelView> {
+    if let Some(cs) = &body.channels {
+        return cs.iter().find(|c| c.name.as_deref() == Some(channel));
     }
-    (body.get("channel").and_then(Value::as_str) == Some(channel)).then_some(body)
+    (body.channel.as_deref() == Some(channel)).then_some(&body.view)
 }
 
 /// The series' value in one channel's view of a diagnosis (`wear_degree`, `novelty`,
 /// `findings`), with the novelty threshold.
-fn value_in(view: &Value, series: &Series) -> Option<(f64, Option<f64>)> {
+fn value_in(view: &ChannelView, series: &Series) -> Option<(f64, Option<f64>)> {
     match series {
-        Series::Wear => view["wear_degree"]["estimate"].as_f64().map(|v| (v, None)),
-        Series::Novelty => view["novelty"]["score"]
-            .as_f64()
-            .map(|v| (v, view["novelty"]["threshold"].as_f64())),
-        Series::Finding { kind, shaft } => view["findings"]
-            .as_array()?
+        Series::Wear => view.wear_degree.as_ref()?.estimate.map(|v| (v, None)),
+        Series::Novelty => {
+            let n = view.novelty.as_ref()?;
+            n.score.map(|v| (v, n.threshold))
+        }
+        Series::Finding { kind, shaft } => view
+            .findings
             .iter()
-            .filter(|f| f["kind"].as_str() == Some(kind.as_str()))
-            .filter(|f| shaft.is_none() || f["shaft"].as_str() == shaft.as_deref())
-            .filter_map(|f| f["strength"].as_f64())
+            .filter(|f| f.kind == Some(*kind))
+            .filter(|f| shaft.is_none() || f.shaft.as_deref() == shaft.as_deref())
+            .filter_map(|f| f.strength)
             .reduce(f64::max)
             .map(|v| (v, None)),
     }
@@ -131,10 +210,10 @@ fn points<'a>(rows: &'a [DiagnosisRow], series: &Series, channel: Option<&str>) 
     rows.iter()
         .filter_map(|d| {
             let (value, novelty_threshold) = if series.needs_body(channel) {
-                let body: Value = serde_json::from_str(&d.body).ok()?;
+                let body: StoredBody = serde_json::from_str(&d.body).ok()?;
                 let view = match channel {
                     Some(c) => channel_view(&body, c)?,
-                    None => &body,
+                    None => &body.view,
                 };
                 value_in(view, series)?
             } else {

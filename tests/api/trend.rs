@@ -168,6 +168,14 @@ async fn trend_queries_are_checked(b: Backend) {
     let (s, p) = get_trend(&app, "m1", "?series=temperature").await;
     assert_eq!(s, 400, "{p}");
     assert_eq!(p["parameter"], "series", "{p}");
+    // A finding kind the service does not write is named, with the kinds it does.
+    let (s, p) = get_trend(&app, "m1", "?series=finding:gear@output").await;
+    assert_eq!(s, 400, "{p}");
+    let detail = p["detail"].as_str().unwrap();
+    assert!(
+        detail.contains("`gear`") && detail.contains("`gear-local-damage`"),
+        "{p}"
+    );
     // One point: a series, no trend yet.
     let (s, t) = get_trend(&app, "m1", "").await;
     assert_eq!(s, 200, "{t}");

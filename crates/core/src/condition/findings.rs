@@ -20,7 +20,7 @@
 //! whole fractions of its rate) is named by elimination: its gears' sidebands fall in the
 //! shared class, which no slower shaft's candidate explains alone.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::baseline::{Departure, StateScore, TOP_K};
 use super::candidates::{Response, candidates};
@@ -53,12 +53,79 @@ pub struct Evidence {
     pub why: String,
 }
 
+/// What a finding points at (the API writes it in kebab case: `gear-local-damage`, …).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FindingKind {
+    /// One gear's local tooth damage (a crack, a chip, a broken tooth).
+    GearLocalDamage,
+    /// One gear's eccentricity (its mesh modulated once per revolution).
+    GearEccentricity,
+    /// A shaft (imbalance, bend, misalignment, looseness).
+    Shaft,
+    /// A rolling bearing's defect.
+    Bearing,
+    /// Vibration at no shaft's lines.
+    NonSynchronous,
+    /// A stage's mesh lines moving together (tooth wear, load or contact).
+    MeshLines,
+    /// The way vibration reaches the sensor.
+    TransferPath,
+    /// What no candidate explains.
+    Unexplained,
+}
+
+impl FindingKind {
+    /// The word the API writes.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            FindingKind::GearLocalDamage => "gear-local-damage",
+            FindingKind::GearEccentricity => "gear-eccentricity",
+            FindingKind::Shaft => "shaft",
+            FindingKind::Bearing => "bearing",
+            FindingKind::NonSynchronous => "non-synchronous",
+            FindingKind::MeshLines => "mesh-lines",
+            FindingKind::TransferPath => "transfer-path",
+            FindingKind::Unexplained => "unexplained",
+        }
+    }
+
+    /// Does a finding of this kind name a part (a gear's local damage or eccentricity, a
+    /// shaft, a bearing) rather than a change every tooth or the whole path shares?
+    pub fn names_part(self) -> bool {
+        matches!(
+            self,
+            FindingKind::GearLocalDamage
+                | FindingKind::GearEccentricity
+                | FindingKind::Shaft
+                | FindingKind::Bearing
+        )
+    }
+
+    /// Is it a gear's (local damage or eccentricity)?
+    pub fn is_gear(self) -> bool {
+        matches!(
+            self,
+            FindingKind::GearLocalDamage | FindingKind::GearEccentricity
+        )
+    }
+
+    /// A change of a whole band or of a stage's mesh lines, not of one part.
+    fn is_common(self) -> bool {
+        matches!(self, FindingKind::TransferPath | FindingKind::MeshLines)
+    }
+}
+
+impl std::fmt::Display for FindingKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
 /// What a record's departure points at.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Finding {
-    /// `gear-local-damage`, `gear-eccentricity`, `shaft`, `bearing`, `non-synchronous`,
-    /// `mesh-lines`, `transfer-path` or `unexplained`.
-    pub kind: &'static str,
+    pub kind: FindingKind,
     /// The description's shaft name (`null` when no shaft is named).
     pub shaft: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -78,15 +145,6 @@ pub struct Finding {
     pub evidence: Vec<Evidence>,
 }
 
-/// Does a finding of `kind` name a part (a gear's local damage or eccentricity, a shaft, a
-/// bearing) rather than a change every tooth or the whole path shares?
-pub fn names_part(kind: &str) -> bool {
-    matches!(
-        kind,
-        "gear-local-damage" | "gear-eccentricity" | "shaft" | "bearing"
-    )
-}
-
 /// Share of a record's change a part's finding must explain for the change to be that part's
 /// ("mostly": at least as much as every other cause together).
 pub const MOSTLY: f64 = 0.5;
@@ -99,7 +157,7 @@ pub const MOSTLY: f64 = 0.5;
 pub fn mostly_one_part(findings: &[Finding]) -> Option<&Finding> {
     findings
         .iter()
-        .find(|f| names_part(f.kind) && f.share >= MOSTLY)
+        .find(|f| f.kind.names_part() && f.share >= MOSTLY)
 }
 
 /// Is `feature` a line amplitude (its change reads in dB) rather than a metric?
@@ -257,17 +315,13 @@ pub fn explained(
     // Parts first, then the common changes, each by share; what is left comes last (it is
     // first only when nothing was named).
     out.sort_by(|a, b| {
-        is_common(a.kind)
-            .cmp(&is_common(b.kind))
+        a.kind
+            .is_common()
+            .cmp(&b.kind.is_common())
             .then(b.share.total_cmp(&a.share))
     });
     out.extend(unexplained(&ex, score, &out));
     (ex, out)
-}
-
-/// A change of a whole band or of a stage's mesh lines, not of one part.
-fn is_common(kind: &str) -> bool {
-    matches!(kind, "transfer-path" | "mesh-lines")
 }
 
 /// The finding of one pick.
@@ -298,7 +352,7 @@ fn finding_of<'a>(
         .unwrap_or_default();
     let explains = format!("explains {:.0} % of the change", 100.0 * p.share);
     let mut f = Finding {
-        kind: "unexplained",
+        kind: FindingKind::Unexplained,
         shaft: None,
         gear: None,
         bearing: None,
@@ -313,9 +367,9 @@ fn finding_of<'a>(
             let g = &parts.gears[*gear];
             let local = matches!(p.cause, Cause::GearLocal { .. });
             f.kind = if local {
-                "gear-local-damage"
+                FindingKind::GearLocalDamage
             } else {
-                "gear-eccentricity"
+                FindingKind::GearEccentricity
             };
             f.shaft = Some(g.shaft.clone());
             f.gear = Some(GearRef {
@@ -356,7 +410,7 @@ fn finding_of<'a>(
                 Some(1) => "misalignment",
                 _ => "looseness or rub",
             };
-            f.kind = "shaft";
+            f.kind = FindingKind::Shaft;
             f.shaft = Some(shaft.clone());
             f.detail = Some(detail.into());
             f.summary = format!("shaft `{shaft}` ({detail}): {lead} ({explains})");
@@ -367,7 +421,7 @@ fn finding_of<'a>(
                 .iter()
                 .find(|b| &b.name == bearing)
                 .map(|b| b.shaft.clone());
-            f.kind = "bearing";
+            f.kind = FindingKind::Bearing;
             f.detail = Some(defect_words(defect).into());
             f.summary = format!(
                 "bearing `{bearing}`{} ({}): {lead} ({explains})",
@@ -381,7 +435,7 @@ fn finding_of<'a>(
             f.bearing = Some(bearing.clone());
         }
         Cause::NonSynchronous => {
-            f.kind = "non-synchronous";
+            f.kind = FindingKind::NonSynchronous;
             f.detail = Some("friction, looseness or a bearing not described".into());
             f.summary = format!(
                 "vibration at no shaft's lines (friction, looseness or a bearing not \
@@ -390,7 +444,7 @@ fn finding_of<'a>(
         }
         Cause::MeshLines { stage } => {
             let tau = p.amplitudes.first().copied().unwrap_or(0.0);
-            f.kind = "mesh-lines";
+            f.kind = FindingKind::MeshLines;
             f.detail = Some(format!("stage {stage}: tooth wear, load or contact"));
             f.summary = format!(
                 "the mesh lines of stage {stage} changed together by {:+.1} dB (tooth wear, or \
@@ -400,7 +454,7 @@ fn finding_of<'a>(
         }
         Cause::Path { region } => {
             let tau = p.amplitudes.first().copied().unwrap_or(0.0);
-            f.kind = "transfer-path";
+            f.kind = FindingKind::TransferPath;
             f.detail = Some(region_words(region));
             f.summary = format!(
                 "the way vibration reaches the sensor changed in {}: every line there moved \
@@ -443,7 +497,7 @@ fn unexplained(ex: &Explanation, score: &StateScore, found: &[Finding]) -> Optio
     }
     let share = (1.0 - found.iter().map(|f| f.share).sum::<f64>()).max(0.0);
     Some(Finding {
-        kind: "unexplained",
+        kind: FindingKind::Unexplained,
         shaft: None,
         gear: None,
         bearing: None,
@@ -577,7 +631,7 @@ mod tests {
         }
         let ch: Vec<(&str, f64)> = changes.iter().map(|(k, v)| (k.as_str(), *v)).collect();
         let f = run(&ch);
-        assert_eq!(f[0].kind, "gear-local-damage", "{f:#?}");
+        assert_eq!(f[0].kind.as_str(), "gear-local-damage", "{f:#?}");
         assert_eq!(f[0].shaft.as_deref(), Some("idler"));
         assert_eq!(f[0].gear.as_ref().unwrap().teeth, 48, "{f:#?}");
         assert!(f[0].share > 0.8, "{f:#?}");
@@ -586,7 +640,7 @@ mod tests {
     #[test]
     fn a_first_order_line_names_the_shaft() {
         let f = run(&[("shaft.in.1x", 1.5)]);
-        assert_eq!(f[0].kind, "shaft", "{f:#?}");
+        assert_eq!(f[0].kind.as_str(), "shaft", "{f:#?}");
         assert_eq!(f[0].shaft.as_deref(), Some("in"));
         assert_eq!(f[0].detail.as_deref(), Some("imbalance or bent shaft"));
     }
@@ -594,7 +648,7 @@ mod tests {
     #[test]
     fn bearing_lines_name_the_bearing() {
         let f = run(&[("bearing.b-out.bpfi", 1.5), ("env.none", 0.3)]);
-        assert_eq!(f[0].kind, "bearing", "{f:#?}");
+        assert_eq!(f[0].kind.as_str(), "bearing", "{f:#?}");
         assert_eq!(f[0].bearing.as_deref(), Some("b-out"));
         assert_eq!(f[0].detail.as_deref(), Some("inner race"));
     }
@@ -609,7 +663,7 @@ mod tests {
             .map(|(k, _)| (k.as_str(), -0.7))
             .collect();
         let f = run(&changes);
-        assert_eq!(f[0].kind, "transfer-path", "{f:#?}");
+        assert_eq!(f[0].kind.as_str(), "transfer-path", "{f:#?}");
         assert!(f[0].detail.as_deref().unwrap().contains("mesh harmonics"));
     }
 
@@ -624,12 +678,18 @@ mod tests {
             .map(|(k, _)| (k.as_str(), 0.7))
             .collect();
         let f = run(&up);
-        assert!(f.iter().any(|x| x.kind == "mesh-lines"), "{f:#?}");
+        assert!(f.iter().any(|x| x.kind == FindingKind::MeshLines), "{f:#?}");
         assert!(mostly_one_part(&f).is_none(), "{f:#?}");
         let f = run(&[("shaft.in.1x", 1.5)]);
-        assert_eq!(mostly_one_part(&f).map(|x| x.kind), Some("shaft"));
+        assert_eq!(
+            mostly_one_part(&f).map(|x| x.kind),
+            Some(FindingKind::Shaft)
+        );
         let f = run(&[("bearing.b-out.bpfi", 1.5), ("env.none", 0.3)]);
-        assert_eq!(mostly_one_part(&f).map(|x| x.kind), Some("bearing"));
+        assert_eq!(
+            mostly_one_part(&f).map(|x| x.kind),
+            Some(FindingKind::Bearing)
+        );
         assert!(mostly_one_part(&[]).is_none());
     }
 
@@ -641,7 +701,7 @@ mod tests {
         f.push(("stat.kurtosis", 1.0));
         let out = findings(&score(&f, &[("stat.kurtosis", 1.5)]), &parts(), None);
         assert_eq!(out.len(), 1, "{out:#?}");
-        assert_eq!(out[0].kind, "unexplained");
+        assert_eq!(out[0].kind.as_str(), "unexplained");
         // In words, not the feature's code.
         let summary = &out[0].summary;
         assert!(

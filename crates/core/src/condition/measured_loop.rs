@@ -17,7 +17,7 @@ use serde::Serialize;
 
 use super::baseline::StateScore;
 use super::explain::Cause;
-use super::findings::{Finding, explained, names_part};
+use super::findings::{Finding, FindingKind, explained};
 use super::parts::Parts;
 
 /// dB per ln unit of amplitude.
@@ -26,9 +26,8 @@ const DB_PER_LN: f64 = 20.0 / std::f64::consts::LN_10;
 /// One accepted effect and the error after it.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct LoopStep {
-    /// As a finding's `kind`: `gear-local-damage`, `gear-eccentricity`, `shaft`, `bearing`,
-    /// `non-synchronous`, `mesh-lines`, `transfer-path`.
-    pub kind: &'static str,
+    /// As a finding's `kind`.
+    pub kind: FindingKind,
     pub shaft: Option<String>,
     pub bearing: Option<String>,
     /// Share (0–1) of the change it explains.
@@ -58,35 +57,35 @@ pub struct MeasuredLoop {
 impl MeasuredLoop {
     /// The first accepted effect that names a part (a gear, a shaft or a bearing).
     pub fn first_part(&self) -> Option<&LoopStep> {
-        self.steps.iter().find(|s| names_part(s.kind))
+        self.steps.iter().find(|s| s.kind.names_part())
     }
 }
 
 /// What a cause is called, and the shaft and bearing it names.
-fn named(cause: &Cause, parts: &Parts) -> (&'static str, Option<String>, Option<String>) {
+fn named(cause: &Cause, parts: &Parts) -> (FindingKind, Option<String>, Option<String>) {
     match cause {
         Cause::GearLocal { gear } => (
-            "gear-local-damage",
+            FindingKind::GearLocalDamage,
             Some(parts.gears[*gear].shaft.clone()),
             None,
         ),
         Cause::GearEccentric { gear } => (
-            "gear-eccentricity",
+            FindingKind::GearEccentricity,
             Some(parts.gears[*gear].shaft.clone()),
             None,
         ),
-        Cause::Shaft { shaft } => ("shaft", Some(shaft.clone()), None),
+        Cause::Shaft { shaft } => (FindingKind::Shaft, Some(shaft.clone()), None),
         Cause::Bearing { bearing, .. } => {
             let shaft = parts
                 .bearings
                 .iter()
                 .find(|b| b.name == *bearing)
                 .map(|b| b.shaft.clone());
-            ("bearing", shaft, Some(bearing.clone()))
+            (FindingKind::Bearing, shaft, Some(bearing.clone()))
         }
-        Cause::NonSynchronous => ("non-synchronous", None, None),
-        Cause::MeshLines { .. } => ("mesh-lines", None, None),
-        Cause::Path { .. } => ("transfer-path", None, None),
+        Cause::NonSynchronous => (FindingKind::NonSynchronous, None, None),
+        Cause::MeshLines { .. } => (FindingKind::MeshLines, None, None),
+        Cause::Path { .. } => (FindingKind::TransferPath, None, None),
     }
 }
 

@@ -34,7 +34,7 @@ mod test_util;
 
 pub use baseline::{Coverage, StateBaseline, StateRecord, StateScore};
 pub use evidence::{EVIDENCE_VERSION, Evidence, evidence};
-pub use findings::{Finding, findings};
+pub use findings::{Finding, FindingKind, findings};
 pub use parts::Parts;
 pub use plot::{EvidencePlot, evidence_plot};
 pub use state::{Load, OperatingState, SpeedSource, Tacho, measure};
