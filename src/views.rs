@@ -278,7 +278,7 @@ mod tests {
             id: "a1".into(),
             machine_id: "m1".into(),
             level: Level::Alarm,
-            state: "open".into(),
+            state: crate::assessment::episodes::AlertState::Open,
             opened_at: 0,
             record_id: "r1".into(),
             acknowledged_at: None,

@@ -18,6 +18,7 @@ use super::AppState;
 use super::auth::Caller;
 use super::error::{ApiError, ApiResult};
 use super::http::{check_machine_id, read_body};
+use crate::assessment::episodes::{AlertEvent, AlertState};
 use crate::keys::Scope;
 use crate::store::{Acknowledged, AlertFilter, AlertRow, now_ms};
 use crate::time::rfc3339;
@@ -172,8 +173,8 @@ pub async fn acknowledge(
             axum::http::StatusCode::CONFLICT,
             "alert-not-open",
             "Alert not open",
-            match a.state.as_str() {
-                "closed" => format!(
+            match a.state {
+                AlertState::Closed => format!(
                     "alert `{id}` is closed (its machine's level stayed low); nothing to acknowledge"
                 ),
                 _ => format!(
@@ -228,7 +229,7 @@ pub fn state_json(record_level: crate::assessment::Level, open: Option<&AlertRow
         "record_level": record_level,
         "alert_level": alert_level,
         "alert_since": open.map(|a| rfc3339(a.opened_at)),
-        "acknowledged": open.map(|a| a.state == "acknowledged"),
+        "acknowledged": open.map(|a| a.state == AlertState::Acknowledged),
     })
 }
 
@@ -253,13 +254,12 @@ pub async fn open_alert_json(app: &AppState, open: Option<&AlertRow>) -> ApiResu
         .await?
         .map(|(_, e)| e)
         .unwrap_or_default();
-    let decided = events
-        .iter()
-        .rev()
-        .find(|e| matches!(e.event.as_str(), "opened" | "escalated") && e.record_id.is_some());
+    let decided = events.iter().rev().find(|e| {
+        matches!(e.event, AlertEvent::Opened | AlertEvent::Escalated) && e.record_id.is_some()
+    });
     let (event, record_id) = match decided {
-        Some(e) => (e.event.as_str(), e.record_id.clone().unwrap_or_default()),
-        None => ("opened", a.record_id.clone()),
+        Some(e) => (e.event, e.record_id.clone().unwrap_or_default()),
+        None => (AlertEvent::Opened, a.record_id.clone()),
     };
     v["evidence"] = match app.store.diagnosis_of_record(&record_id).await? {
         None => Value::Null,

@@ -16,7 +16,6 @@ use axum::extract::{MatchedPath, Request, State};
 use axum::http::StatusCode;
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
-use axum::routing::{delete, get, post};
 use tokio::net::TcpListener;
 use tokio::sync::{Notify, watch};
 use tower_http::timeout::TimeoutLayer;
@@ -41,6 +40,7 @@ pub mod physics;
 pub mod physics_queue;
 pub mod read;
 pub mod records;
+pub mod routes;
 pub mod signatures;
 pub mod spectrum;
 pub mod tables;
@@ -125,67 +125,21 @@ impl AppState {
     }
 }
 
-/// Every route of the service. The list is mirrored by `openapi.yaml`; a test fails when
-/// they drift apart.
+/// The service: every route of [`routes::routes`] (one method router per path), its fallbacks
+/// and layers.
 pub fn router(state: AppState) -> Router {
-    let api = Router::new()
-        .route("/v1/machines", get(read::list_machines))
-        .route(
-            "/v1/machines/{machine_id}",
-            get(read::get_machine)
-                .put(machines::put)
-                .delete(lifecycle::delete),
-        )
-        .route(
-            "/v1/machines/{machine_id}/baseline",
-            get(machines::get_baseline)
-                .post(machines::post_baseline)
-                .delete(machines::delete_baseline),
-        )
-        .route(
-            "/v1/machines/{machine_id}/baseline/{record_id}",
-            delete(machines::delete_baseline_record),
-        )
-        .route("/v1/gearboxes", get(gearboxes::list))
-        .route(
-            "/v1/gearboxes/{gearbox_id}",
-            get(gearboxes::get).put(gearboxes::put),
-        )
-        .route(
-            "/v1/machines/{machine_id}/records",
-            post(records::post_record),
-        )
-        .route(
-            "/v1/machines/{machine_id}/diagnoses",
-            get(read::list_diagnoses),
-        )
-        .route("/v1/machines/{machine_id}/trend", get(trend::get_trend))
-        .route(
-            "/v1/machines/{machine_id}/calibration",
-            post(calibration::post)
-                .get(calibration::get)
-                .delete(calibration::delete),
-        )
-        .route("/v1/diagnoses/{diagnosis_id}", get(read::get_diagnosis))
-        .route("/v1/alerts", get(alerts::list))
-        .route("/v1/alerts/{alert_id}", get(alerts::get))
-        .route(
-            "/v1/alerts/{alert_id}/acknowledge",
-            post(alerts::acknowledge),
-        )
-        .route("/v1/webhooks", post(webhooks::create).get(webhooks::list))
-        .route("/v1/webhooks/{webhook_id}", delete(webhooks::delete))
-        .route(
-            "/v1/webhooks/{webhook_id}/deliveries",
-            get(webhooks::deliveries),
-        )
-        .route("/v1/records/{record_id}", get(read::get_record))
-        .route("/healthz", get(health::healthz))
-        .route("/readyz", get(health::readyz))
-        .route("/metrics", get(health::metrics))
-        .route("/", get(dashboard::index))
-        .route("/app.js", get(dashboard::app_js))
-        .route("/style.css", get(dashboard::style));
+    let mut by_path: std::collections::BTreeMap<&str, axum::routing::MethodRouter<AppState>> =
+        std::collections::BTreeMap::new();
+    for r in routes::routes() {
+        let merged = match by_path.remove(r.path) {
+            Some(m) => m.merge(r.handler),
+            None => r.handler,
+        };
+        by_path.insert(r.path, merged);
+    }
+    let api = by_path
+        .into_iter()
+        .fold(Router::new(), |api, (path, m)| api.route(path, m));
     api.fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed)
         .layer(TimeoutLayer::with_status_code(
@@ -206,43 +160,6 @@ pub fn router(state: AppState) -> Router {
         }))
         .with_state(state)
 }
-
-/// The route templates [`router`] serves, as `(METHOD, path)`; the OpenAPI test compares them
-/// with the spec.
-pub const ROUTES: &[(&str, &str)] = &[
-    ("GET", "/v1/machines"),
-    ("GET", "/v1/machines/{machine_id}"),
-    ("PUT", "/v1/machines/{machine_id}"),
-    ("DELETE", "/v1/machines/{machine_id}"),
-    ("GET", "/v1/machines/{machine_id}/baseline"),
-    ("POST", "/v1/machines/{machine_id}/baseline"),
-    ("DELETE", "/v1/machines/{machine_id}/baseline"),
-    ("DELETE", "/v1/machines/{machine_id}/baseline/{record_id}"),
-    ("GET", "/v1/gearboxes"),
-    ("GET", "/v1/gearboxes/{gearbox_id}"),
-    ("PUT", "/v1/gearboxes/{gearbox_id}"),
-    ("POST", "/v1/machines/{machine_id}/records"),
-    ("GET", "/v1/machines/{machine_id}/diagnoses"),
-    ("GET", "/v1/machines/{machine_id}/trend"),
-    ("POST", "/v1/machines/{machine_id}/calibration"),
-    ("GET", "/v1/machines/{machine_id}/calibration"),
-    ("DELETE", "/v1/machines/{machine_id}/calibration"),
-    ("GET", "/v1/diagnoses/{diagnosis_id}"),
-    ("GET", "/v1/alerts"),
-    ("GET", "/v1/alerts/{alert_id}"),
-    ("POST", "/v1/alerts/{alert_id}/acknowledge"),
-    ("POST", "/v1/webhooks"),
-    ("GET", "/v1/webhooks"),
-    ("DELETE", "/v1/webhooks/{webhook_id}"),
-    ("GET", "/v1/webhooks/{webhook_id}/deliveries"),
-    ("GET", "/v1/records/{record_id}"),
-    ("GET", "/healthz"),
-    ("GET", "/readyz"),
-    ("GET", "/metrics"),
-    ("GET", "/"),
-    ("GET", "/app.js"),
-    ("GET", "/style.css"),
-];
 
 async fn not_found(req: Request) -> ApiError {
     ApiError::not_found(

@@ -19,6 +19,7 @@ use crate::condition::FindingKind;
 use crate::store::{AlertRow, DiagnosisRow};
 use crate::time::rfc3339;
 use crate::trend::{self, Sample, Trend, TrendOptions};
+use gearwear_core::words::UnknownWord;
 
 /// How many of a machine's latest diagnoses (by measurement time) a trend fits: 50 days at
 /// 4 records a day.
@@ -49,13 +50,14 @@ impl Series {
                     Some((k, s)) => (k, Some(s.to_string())),
                     None => (name, None),
                 };
-                let kind = kind_of(kind).ok_or_else(|| {
+                let kind: FindingKind = kind.parse().map_err(|e: UnknownWord| {
                     ApiError::bad_request(
                         "invalid-query",
                         "Invalid query parameter",
                         format!(
-                            "`series=finding:<kind>` names no finding kind: `{kind}` (one of {})",
-                            KINDS
+                            "`series=finding:<kind>` names no finding kind: `{}` (one of {})",
+                            e.word,
+                            e.words
                                 .iter()
                                 .map(|k| format!("`{k}`"))
                                 .collect::<Vec<_>>()
@@ -114,23 +116,6 @@ struct Point<'a> {
     novelty_threshold: Option<f64>,
 }
 
-/// Every finding kind, in the API's words.
-const KINDS: [FindingKind; 8] = [
-    FindingKind::GearLocalDamage,
-    FindingKind::GearEccentricity,
-    FindingKind::Shaft,
-    FindingKind::Bearing,
-    FindingKind::NonSynchronous,
-    FindingKind::MeshLines,
-    FindingKind::TransferPath,
-    FindingKind::Unexplained,
-];
-
-/// The finding kind the API writes as `word`.
-fn kind_of(word: &str) -> Option<FindingKind> {
-    KINDS.into_iter().find(|k| k.as_str() == word)
-}
-
 /// What a series reads of a stored diagnosis body (the assessment the service wrote): the
 /// deciding channel's view, and each channel's when the record had several.
 #[derive(Debug, Default, Deserialize)]
@@ -172,7 +157,7 @@ struct StoredFinding {
 }
 
 fn known_kind<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<FindingKind>, D::Error> {
-    Ok(kind_of(&String::deserialize(d)?))
+    Ok(String::deserialize(d)?.parse().ok())
 }
 
 /// The part of a diagnosis body that describes `channel`: the `channels` entry of that name,

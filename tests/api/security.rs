@@ -1,8 +1,8 @@
 //! Item 5 of the reliability issue, "Security", on both stores
 //! (`cargo test --release --test api security`; docs/reliability/security.md):
 //!
-//! * every route in `gearwear::service::ROUTES` against a table of the scope it needs (a route
-//!   missing from the table fails the test), with no key, malformed headers, unknown, tampered
+//! * every route of the service's one route list (`gearwear::service::routes`), with the access
+//!   it declares — checked against `openapi.yaml`'s `security` and `x-scope` — with no key, malformed headers, unknown, tampered
 //!   and revoked keys, each scope; refusals store nothing; `--dashboard-without-key` opens reads only;
 //! * keys stored hashed (the secret is nowhere in the SQLite file or the PostgreSQL tables);
 //! * body size, sample count and rate limits per key;
@@ -17,7 +17,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use gearwear::keys::Scope;
-use gearwear::service::ROUTES;
+use gearwear::service::routes::{Access as Need, routes};
 use gearwear::store::{CalibrationRow, WebhookRow};
 use reqwest::header::{HeaderMap, HeaderValue};
 use serde_json::{Value, json};
@@ -39,144 +39,34 @@ both_stores!(
 
 // ---------- The scope table ----------
 
-/// What a route needs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Need {
-    /// No key (health, metrics, the dashboard's static files).
-    Public,
-    /// A key granting this scope (`admin` grants every scope).
-    Key(Scope),
+/// Every route as `(METHOD, template, access)`, from the service's route list.
+fn route_list() -> Vec<(String, &'static str, Need)> {
+    routes()
+        .into_iter()
+        .map(|r| (r.method.to_string(), r.path, r.access))
+        .collect()
 }
 
-/// Every route with the scope it needs. A route added to `ROUTES` without a row here fails
-/// [`the_table_covers_every_route`] and the matrix.
-const TABLE: &[(&str, &str, Need)] = &[
-    ("GET", "/v1/machines", Need::Key(Scope::Read)),
-    ("GET", "/v1/machines/{machine_id}", Need::Key(Scope::Read)),
-    (
-        "POST",
-        "/v1/machines/{machine_id}/records",
-        Need::Key(Scope::Ingest),
-    ),
-    (
-        "GET",
-        "/v1/machines/{machine_id}/diagnoses",
-        Need::Key(Scope::Read),
-    ),
-    (
-        "GET",
-        "/v1/machines/{machine_id}/trend",
-        Need::Key(Scope::Read),
-    ),
-    (
-        "POST",
-        "/v1/machines/{machine_id}/calibration",
-        Need::Key(Scope::Admin),
-    ),
-    (
-        "GET",
-        "/v1/machines/{machine_id}/calibration",
-        Need::Key(Scope::Read),
-    ),
-    (
-        "DELETE",
-        "/v1/machines/{machine_id}/calibration",
-        Need::Key(Scope::Admin),
-    ),
-    (
-        "GET",
-        "/v1/diagnoses/{diagnosis_id}",
-        Need::Key(Scope::Read),
-    ),
-    ("GET", "/v1/records/{record_id}", Need::Key(Scope::Read)),
-    ("PUT", "/v1/machines/{machine_id}", Need::Key(Scope::Admin)),
-    (
-        "DELETE",
-        "/v1/machines/{machine_id}",
-        Need::Key(Scope::Admin),
-    ),
-    (
-        "GET",
-        "/v1/machines/{machine_id}/baseline",
-        Need::Key(Scope::Read),
-    ),
-    (
-        "POST",
-        "/v1/machines/{machine_id}/baseline",
-        Need::Key(Scope::Admin),
-    ),
-    (
-        "DELETE",
-        "/v1/machines/{machine_id}/baseline",
-        Need::Key(Scope::Admin),
-    ),
-    (
-        "DELETE",
-        "/v1/machines/{machine_id}/baseline/{record_id}",
-        Need::Key(Scope::Admin),
-    ),
-    ("GET", "/v1/gearboxes", Need::Key(Scope::Read)),
-    ("GET", "/v1/gearboxes/{gearbox_id}", Need::Key(Scope::Read)),
-    ("PUT", "/v1/gearboxes/{gearbox_id}", Need::Key(Scope::Admin)),
-    ("POST", "/v1/webhooks", Need::Key(Scope::Admin)),
-    ("GET", "/v1/webhooks", Need::Key(Scope::Admin)),
-    (
-        "DELETE",
-        "/v1/webhooks/{webhook_id}",
-        Need::Key(Scope::Admin),
-    ),
-    (
-        "GET",
-        "/v1/webhooks/{webhook_id}/deliveries",
-        Need::Key(Scope::Admin),
-    ),
-    ("GET", "/v1/alerts", Need::Key(Scope::Read)),
-    ("GET", "/v1/alerts/{alert_id}", Need::Key(Scope::Read)),
-    (
-        "POST",
-        "/v1/alerts/{alert_id}/acknowledge",
-        Need::Key(Scope::Acknowledge),
-    ),
-    ("GET", "/healthz", Need::Public),
-    ("GET", "/readyz", Need::Public),
-    ("GET", "/metrics", Need::Public),
-    ("GET", "/", Need::Public),
-    ("GET", "/app.js", Need::Public),
-    ("GET", "/style.css", Need::Public),
-];
-
-fn need(method: &str, template: &str) -> Need {
-    TABLE
-        .iter()
-        .find(|(m, p, _)| *m == method && *p == template)
-        .map(|(_, _, n)| *n)
-        .unwrap_or_else(|| {
-            panic!(
-                "{method} {template} is served (ROUTES) but has no row in the security table of \
-                 tests/api/security.rs: add it with the scope it needs, and a request for it"
-            )
-        })
-}
-
-/// The table and `ROUTES` list the same routes, and a route is public in the table exactly
-/// when openapi.yaml gives it `security: []`.
+/// A route is public exactly when openapi.yaml gives it `security: []`, and a keyed route's
+/// scope is the spec's `x-scope`.
 #[test]
-fn the_table_covers_every_route() {
-    for (m, p) in ROUTES {
-        need(m, p);
-    }
-    for (m, p, n) in TABLE {
-        assert!(
-            ROUTES.contains(&(*m, *p)),
-            "{m} {p} is in the security table but not served"
-        );
-        let op = &spec()["paths"][*p][m.to_ascii_lowercase()];
+fn the_route_list_s_access_is_the_spec_s() {
+    for (m, p, n) in route_list() {
+        let op = &spec()["paths"][p][m.to_ascii_lowercase()];
         let public_in_spec = op["security"].as_array().is_some_and(|a| a.is_empty());
         assert_eq!(
             public_in_spec,
-            *n == Need::Public,
-            "{m} {p}: the table says {n:?}, openapi.yaml's `security` says otherwise"
+            n == Need::Public,
+            "{m} {p}: the route list says {n:?}, openapi.yaml's `security` says otherwise"
         );
+        if let Need::Key(scope) = n {
+            assert_eq!(
+                op["x-scope"].as_str(),
+                Some(scope.as_str()),
+                "{m} {p}: the route list needs scope `{}`, openapi.yaml's `x-scope` differs",
+                scope.as_str()
+            );
+        }
     }
 }
 
@@ -451,9 +341,11 @@ async fn every_route_needs_a_key_of_its_scope(b: Backend) {
     let (mut n401, mut n403, mut n_ok, mut n_public) = (0, 0, 0, 0);
 
     // Refusals first: nothing may change in the store.
-    for (method, template) in ROUTES {
+    let list = route_list();
+    for (method, template, access) in &list {
+        let (method, template) = (method.as_str(), *template);
         let path = fx.path(template);
-        let Need::Key(scope) = need(method, template) else {
+        let Need::Key(scope) = *access else {
             // Public: answered without a key, and a bad key changes nothing.
             for (what, auth) in &bad {
                 let mut req = request(&app, method, template, &path, true);
@@ -497,22 +389,23 @@ async fn every_route_needs_a_key_of_its_scope(b: Backend) {
 
     // Then every key that grants the scope gets through (whatever the answer, it is not a
     // refusal for the key).
-    for (method, template) in ROUTES {
-        let Need::Key(scope) = need(method, template) else {
+    for (method, template, access) in &list {
+        let (method, template) = (method.as_str(), *template);
+        let Need::Key(scope) = *access else {
             continue;
         };
         for (what, key, scopes) in &keys {
             if !gearwear::keys::grants(scopes, scope) {
                 continue;
             }
-            let path = if *template == "/v1/webhooks/{webhook_id}" && *method == "DELETE" {
+            let path = if template == "/v1/webhooks/{webhook_id}" && method == "DELETE" {
                 // Delete a webhook of its own, not the fixture's.
                 let id = create_hook(&app, "http://127.0.0.1:9/delete-me").await["id"]
                     .as_str()
                     .unwrap()
                     .to_string();
                 format!("/v1/webhooks/{id}")
-            } else if *template == "/v1/machines/{machine_id}" && *method == "DELETE" {
+            } else if template == "/v1/machines/{machine_id}" && method == "DELETE" {
                 // Delete a machine of its own, not the fixture's.
                 let r = app
                     .client
@@ -537,12 +430,12 @@ async fn every_route_needs_a_key_of_its_scope(b: Backend) {
             n_ok += 1;
         }
     }
-    let keyed = TABLE.iter().filter(|r| r.2 != Need::Public).count();
+    let keyed = list.iter().filter(|r| r.2 != Need::Public).count();
     eprintln!(
         "{b:?}: {} routes ({keyed} keyed, {} public): {n401} × 401, {n403} × 403, {n_ok} allowed \
          with the right scope, {n_public} public answers",
-        ROUTES.len(),
-        ROUTES.len() - keyed
+        list.len(),
+        list.len() - keyed
     );
     assert_eq!(n401, keyed * bad.len());
 }
@@ -555,9 +448,10 @@ async fn open_dashboard_opens_reads_only(b: Backend) {
     let bad = bad_credentials(&app).await;
     let before = snapshot(&app, &fx.machine).await;
     let (mut reads, mut writes) = (0, 0);
-    for (method, template) in ROUTES {
+    for (method, template, access) in &route_list() {
+        let (method, template) = (method.as_str(), *template);
         let path = fx.path(template);
-        match need(method, template) {
+        match *access {
             Need::Public => {}
             Need::Key(Scope::Read) => {
                 // No key: answered (200, or 404 for an id with nothing behind it).

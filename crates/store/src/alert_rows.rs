@@ -1,6 +1,7 @@
 //! An alert episode's row: what the alert store keeps and its events carry.
 
 use gearwear_core::assessment::Level;
+use gearwear_core::assessment::episodes::AlertState;
 use serde::{Deserialize, Serialize};
 
 /// One episode.
@@ -10,8 +11,7 @@ pub struct AlertRow {
     pub machine_id: String,
     /// `warning` or `alarm`.
     pub level: Level,
-    /// `open`, `acknowledged` or `closed`.
-    pub state: String,
+    pub state: AlertState,
     pub opened_at: i64,
     /// The record that opened it.
     pub record_id: String,

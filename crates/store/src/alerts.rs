@@ -11,7 +11,7 @@ pub use super::alert_rows::AlertRow;
 use crate::events::{DiagnosisEvent, Event, QueuedEvent};
 use async_trait::async_trait;
 use gearwear_core::assessment::Level;
-use gearwear_core::assessment::episodes::EpisodePolicy;
+use gearwear_core::assessment::episodes::{AlertEvent, EpisodePolicy};
 
 /// What the ingest needs to advance a machine's episode with one record.
 #[derive(Debug, Clone)]
@@ -28,8 +28,7 @@ pub struct AlertInput {
 pub struct AlertEventRow {
     pub alert_id: String,
     pub at: i64,
-    /// `opened`, `escalated`, `acknowledged` or `closed`.
-    pub event: String,
+    pub event: AlertEvent,
     pub by: Option<String>,
     pub note: Option<String>,
     pub record_id: Option<String>,
@@ -59,18 +58,25 @@ pub enum Acknowledged {
 
 /// A level as stored (a column written from [`Level::as_str`]).
 pub fn stored_level(text: String) -> StoreResult<Level> {
+    stored_word(text)
+}
+
+/// A column written from one of the core's words (`as_str`), read back as its type.
+pub fn stored_word<T>(text: String) -> StoreResult<T>
+where
+    T: std::str::FromStr<Err = gearwear_core::words::UnknownWord>,
+{
     text.parse()
         .map_err(|e: gearwear_core::words::UnknownWord| crate::StoreError::Decode(e.to_string()))
 }
 
-/// The webhook events of an episode's transition (`event`: `opened`, `escalated`,
-/// `acknowledged` or `closed`): `alert.opened`, `alert.acknowledged` or `alert.closed` (an
+/// The webhook events of an episode's transition `event`: `alert.opened`, `alert.acknowledged` or `alert.closed` (an
 /// escalation has none of its own), and `wear.threshold_crossed` on opening and escalating,
 /// with the record's diagnosis `by` and the level before (`ok` when it opened, `warning` when
 /// it escalated).
 pub fn transition_events(
     a: &AlertRow,
-    event: &str,
+    event: AlertEvent,
     by: Option<&DiagnosisEvent>,
     event_id: &str,
 ) -> Vec<QueuedEvent> {
@@ -78,9 +84,9 @@ pub fn transition_events(
     let record = by.map(DiagnosisEvent::record);
     let alert = a.clone();
     let own = match (event, record) {
-        ("opened", Some(by)) => Some(Event::AlertOpened { alert, by }),
-        ("closed", Some(by)) => Some(Event::AlertClosed { alert, by }),
-        ("acknowledged", _) => Some(Event::AlertAcknowledged { alert }),
+        (AlertEvent::Opened, Some(by)) => Some(Event::AlertOpened { alert, by }),
+        (AlertEvent::Closed, Some(by)) => Some(Event::AlertClosed { alert, by }),
+        (AlertEvent::Acknowledged, _) => Some(Event::AlertAcknowledged { alert }),
         _ => None,
     };
     if let Some(e) = own {
@@ -88,8 +94,8 @@ pub fn transition_events(
     }
     if let (Some(previous_alert_level), Some(d)) = (
         match event {
-            "opened" => Some(Level::Ok),
-            "escalated" => Some(Level::Warning),
+            AlertEvent::Opened => Some(Level::Ok),
+            AlertEvent::Escalated => Some(Level::Warning),
             _ => None,
         },
         by,
@@ -133,7 +139,9 @@ pub trait AlertStore: Send + Sync {
 macro_rules! alerts_sql {
     ($store:ident, $db:ty) => {
         use gearwear_core::assessment::Level;
-        use gearwear_core::assessment::episodes::{OpenEpisode, Tracker, Transition, step};
+        use gearwear_core::assessment::episodes::{
+            AlertEvent, AlertState, OpenEpisode, Tracker, Transition, step,
+        };
         use sqlx::Row;
         use $crate::alerts::*;
         use $crate::*;
@@ -145,7 +153,7 @@ macro_rules! alerts_sql {
                 id: r.try_get("id")?,
                 machine_id: r.try_get("machine_id")?,
                 level: stored_level(r.try_get("level")?)?,
-                state: r.try_get("state")?,
+                state: stored_word(r.try_get("state")?)?,
                 opened_at: r.try_get("opened_at")?,
                 record_id: r.try_get("record_id")?,
                 acknowledged_at: r.try_get("acknowledged_at")?,
@@ -168,7 +176,7 @@ macro_rules! alerts_sql {
             )
             .bind(&e.alert_id)
             .bind(e.at)
-            .bind(&e.event)
+            .bind(e.event.as_str())
             .bind(&e.by)
             .bind(&e.note)
             .bind(&e.record_id)
@@ -246,10 +254,10 @@ macro_rules! alerts_sql {
             .bind(after.run_peak)
             .execute(&mut **tx)
             .await?;
-            let audit = |alert_id: &str, event: &str, level: Option<Level>| AlertEventRow {
+            let audit = |alert_id: &str, event: AlertEvent, level: Option<Level>| AlertEventRow {
                 alert_id: alert_id.to_string(),
                 at: input.measured_at,
-                event: event.to_string(),
+                event,
                 by: None,
                 note: None,
                 record_id: Some(record_id.to_string()),
@@ -262,7 +270,7 @@ macro_rules! alerts_sql {
                         id: new_id(),
                         machine_id: machine_id.to_string(),
                         level: *level,
-                        state: "open".into(),
+                        state: AlertState::Open,
                         opened_at: input.measured_at,
                         record_id: record_id.to_string(),
                         acknowledged_at: None,
@@ -280,7 +288,7 @@ macro_rules! alerts_sql {
                     .bind(&a.id)
                     .bind(&a.machine_id)
                     .bind(a.level.as_str())
-                    .bind(&a.state)
+                    .bind(a.state.as_str())
                     .bind(a.opened_at)
                     .bind(&a.record_id)
                     .bind(a.peak_severity)
@@ -294,8 +302,8 @@ macro_rules! alerts_sql {
                             e.into()
                         }
                     })?;
-                    insert_event(tx, &audit(&a.id, "opened", Some(*level))).await?;
-                    Some((a, "opened"))
+                    insert_event(tx, &audit(&a.id, AlertEvent::Opened, Some(*level))).await?;
+                    Some((a, AlertEvent::Opened))
                 }
                 (Some(Transition::Closed), Some(mut a), _) => {
                     sqlx::query(
@@ -307,11 +315,11 @@ macro_rules! alerts_sql {
                     .bind(record_id)
                     .execute(&mut **tx)
                     .await?;
-                    a.state = "closed".into();
+                    a.state = AlertState::Closed;
                     a.closed_at = Some(input.measured_at);
                     a.closed_record_id = Some(record_id.to_string());
-                    insert_event(tx, &audit(&a.id, "closed", None)).await?;
-                    Some((a, "closed"))
+                    insert_event(tx, &audit(&a.id, AlertEvent::Closed, None)).await?;
+                    Some((a, AlertEvent::Closed))
                 }
                 (t, Some(mut a), Some(o)) => {
                     // Still open: the peak (and, escalating, the level) follow.
@@ -326,8 +334,9 @@ macro_rules! alerts_sql {
                     a.level = o.level;
                     a.peak_severity = o.peak_severity;
                     if matches!(t, Some(Transition::Escalated { .. })) {
-                        insert_event(tx, &audit(&a.id, "escalated", Some(o.level))).await?;
-                        Some((a, "escalated"))
+                        insert_event(tx, &audit(&a.id, AlertEvent::Escalated, Some(o.level)))
+                            .await?;
+                        Some((a, AlertEvent::Escalated))
                     } else {
                         None
                     }
@@ -390,7 +399,7 @@ macro_rules! alerts_sql {
                     Ok(AlertEventRow {
                         alert_id: r.try_get("alert_id")?,
                         at: r.try_get("at")?,
-                        event: r.try_get("event")?,
+                        event: stored_word(r.try_get("event")?)?,
                         by: r.try_get("by_key")?,
                         note: r.try_get("note")?,
                         record_id: r.try_get("record_id")?,
@@ -437,7 +446,7 @@ macro_rules! alerts_sql {
                     &AlertEventRow {
                         alert_id: a.id.clone(),
                         at: now,
-                        event: "acknowledged".into(),
+                        event: AlertEvent::Acknowledged,
                         by: Some(by.to_string()),
                         note: Some(note.to_string()),
                         record_id: None,
@@ -446,7 +455,7 @@ macro_rules! alerts_sql {
                     },
                 )
                 .await?;
-                let events = transition_events(&a, "acknowledged", None, &new_id());
+                let events = transition_events(&a, AlertEvent::Acknowledged, None, &new_id());
                 super::webhooks::queue_events(&mut tx, &events, now).await?;
                 tx.commit().await?;
                 Ok(Acknowledged::Done(a))

@@ -28,7 +28,7 @@
 //! * acknowledging does not change the counts (an acknowledged alert is still open and still
 //!   escalates and closes).
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::{Assessment, ChannelAssessment, Thresholds};
 use crate::novelty::Novelty;
@@ -88,6 +88,39 @@ pub struct Tracker {
     pub open: Option<OpenEpisode>,
 }
 
+/// Where an episode stands: `open` (opened by its records), `acknowledged` (a person saw it;
+/// still open: it escalates and closes as before) or `closed`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AlertState {
+    Open,
+    Acknowledged,
+    Closed,
+}
+
+crate::words::words!(AlertState, "an alert state", {
+    Open => "open",
+    Acknowledged => "acknowledged",
+    Closed => "closed",
+});
+
+/// One line of an episode's audit trail: what happened to it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AlertEvent {
+    Opened,
+    Escalated,
+    Acknowledged,
+    Closed,
+}
+
+crate::words::words!(AlertEvent, "an alert event", {
+    Opened => "opened",
+    Escalated => "escalated",
+    Acknowledged => "acknowledged",
+    Closed => "closed",
+});
+
 /// What a record did to the machine's episode.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Transition {
@@ -100,12 +133,12 @@ pub enum Transition {
 }
 
 impl Transition {
-    /// The audit trail's name of it: `opened`, `escalated`, `closed`.
-    pub fn event(&self) -> &'static str {
+    /// The audit trail's line of it.
+    pub fn event(&self) -> AlertEvent {
         match self {
-            Transition::Opened { .. } => "opened",
-            Transition::Escalated { .. } => "escalated",
-            Transition::Closed => "closed",
+            Transition::Opened { .. } => AlertEvent::Opened,
+            Transition::Escalated { .. } => AlertEvent::Escalated,
+            Transition::Closed => AlertEvent::Closed,
         }
     }
 }

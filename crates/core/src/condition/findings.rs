@@ -75,21 +75,18 @@ pub enum FindingKind {
     Unexplained,
 }
 
-impl FindingKind {
-    /// The word the API writes.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            FindingKind::GearLocalDamage => "gear-local-damage",
-            FindingKind::GearEccentricity => "gear-eccentricity",
-            FindingKind::Shaft => "shaft",
-            FindingKind::Bearing => "bearing",
-            FindingKind::NonSynchronous => "non-synchronous",
-            FindingKind::MeshLines => "mesh-lines",
-            FindingKind::TransferPath => "transfer-path",
-            FindingKind::Unexplained => "unexplained",
-        }
-    }
+crate::words::words!(FindingKind, "a finding kind", {
+    GearLocalDamage => "gear-local-damage",
+    GearEccentricity => "gear-eccentricity",
+    Shaft => "shaft",
+    Bearing => "bearing",
+    NonSynchronous => "non-synchronous",
+    MeshLines => "mesh-lines",
+    TransferPath => "transfer-path",
+    Unexplained => "unexplained",
+});
 
+impl FindingKind {
     /// Does a finding of this kind name a part (a gear's local damage or eccentricity, a
     /// shaft, a bearing) rather than a change every tooth or the whole path shares?
     pub fn names_part(self) -> bool {
@@ -113,12 +110,6 @@ impl FindingKind {
     /// A change of a whole band or of a stage's mesh lines, not of one part.
     fn is_common(self) -> bool {
         matches!(self, FindingKind::TransferPath | FindingKind::MeshLines)
-    }
-}
-
-impl std::fmt::Display for FindingKind {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.as_str())
     }
 }
 
