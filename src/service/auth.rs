@@ -1,15 +1,19 @@
-//! `Authorization: Bearer gw_<id>_<secret>` → the key's scopes; per-key token-bucket rate
-//! limit. The key is looked up by id, its secret hashed and compared in constant time
+//! `Authorization: Bearer gw_<id>_<secret>` → the key's scopes; per-key rate limit
+//! (`governor`). The key is looked up by id, its secret hashed and compared in constant time
 //! ([`crate::keys::verify`]); nothing about the presented token is logged but the id.
 
-use std::collections::HashMap;
-use std::sync::Mutex;
-use std::time::{Duration, Instant};
+use std::num::NonZeroU32;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Duration;
 
 use axum::extract::FromRequestParts;
 use axum::http::StatusCode;
 use axum::http::header::AUTHORIZATION;
 use axum::http::request::Parts;
+use governor::Quota;
+use governor::clock::{Clock, MonotonicClock};
+use governor::middleware::NoOpMiddleware;
+use governor::state::keyed::DashMapStateStore;
 
 use super::AppState;
 use super::error::ApiError;
@@ -103,176 +107,184 @@ impl Caller {
     }
 }
 
-/// Token buckets per key: `rate` tokens per second, at most `burst`.
+/// The per-key rate limit: `rate` requests per second, bursts of `burst`, by the `governor`
+/// crate's keyed limiter (GCRA, which admits exactly what a token bucket of `burst` tokens
+/// refilled at `rate` per second admits). `governor` counts whole requests: a fractional
+/// `--rate-burst` is rounded down (at least 1).
 ///
-/// The map of buckets is bounded: a bucket idle for `burst / rate` seconds has refilled to
-/// `burst`, exactly what a new bucket holds, so dropping it changes nothing. Such buckets are
-/// swept whenever the map grows past a threshold (at least [`SWEEP_AT`], then twice the number
-/// of buckets left after the last sweep, so sweeping costs O(1) per charge amortised).
-pub struct RateLimiter {
+/// The map of keys is bounded: a key whose state is indistinguishable from a new key's (its
+/// bucket full again) is dropped by [`governor::RateLimiter::retain_recent`], which changes
+/// nothing. Kept here, as `governor` has no policy of its own for when to sweep: whenever the
+/// map grows past a threshold (at least [`SWEEP_AT`], then twice the number of keys left after
+/// the last sweep, so sweeping costs O(1) per charge amortised).
+pub struct RateLimiter<C: Clock = MonotonicClock> {
     rate: f64,
-    burst: f64,
-    buckets: Mutex<Buckets>,
-}
-
-/// Buckets before the first sweep.
-pub const SWEEP_AT: usize = 1024;
-
-struct Buckets {
-    map: HashMap<String, (f64, Instant)>,
-    /// Sweep when the map holds this many buckets and a new key arrives.
-    sweep_at: usize,
+    burst: u32,
+    keys: governor::RateLimiter<String, DashMapStateStore<String>, C, NoOpMiddleware<C::Instant>>,
+    /// Sweep when the map holds this many keys.
+    sweep_at: AtomicUsize,
     min_sweep_at: usize,
 }
 
+/// Keys before the first sweep.
+pub const SWEEP_AT: usize = 1024;
+
 impl RateLimiter {
     pub fn new(rate: f64, burst: f64) -> Self {
-        Self::with_sweep_at(rate, burst, SWEEP_AT)
+        Self::with_clock(rate, burst, SWEEP_AT, MonotonicClock)
     }
+}
 
-    /// As [`RateLimiter::new`], sweeping idle buckets once more than `sweep_at` exist.
-    pub fn with_sweep_at(rate: f64, burst: f64, sweep_at: usize) -> Self {
+impl<C: Clock> RateLimiter<C> {
+    /// As [`RateLimiter::new`] on `clock` (tests drive a fake one), sweeping idle keys once
+    /// more than `sweep_at` exist.
+    pub fn with_clock(rate: f64, burst: f64, sweep_at: usize, clock: C) -> Self {
         let sweep_at = sweep_at.max(1);
+        let whole = burst.floor().clamp(1.0, u32::MAX as f64) as u32;
+        // One request every 1/rate s, kept within what `governor`'s nanosecond arithmetic holds
+        // (a rate over 1e9 per second is one per nanosecond; a rate so low that a burst's
+        // refill would overflow is a refill in ~146 years).
+        let max_ns = (u64::MAX / 4) as f64 / f64::from(whole);
+        let period_ns = (1e9 / rate).clamp(1.0, max_ns);
+        let quota = Quota::with_period(Duration::from_nanos(period_ns as u64))
+            .expect("a period of at least 1 ns")
+            .allow_burst(NonZeroU32::new(whole).expect("a burst of at least 1"));
         RateLimiter {
             rate,
-            burst: burst.max(1.0),
-            buckets: Mutex::new(Buckets {
-                map: HashMap::new(),
-                sweep_at,
-                min_sweep_at: sweep_at,
-            }),
+            burst: whole,
+            keys: governor::RateLimiter::dashmap_with_clock(quota, clock),
+            sweep_at: AtomicUsize::new(sweep_at),
+            min_sweep_at: sweep_at,
         }
     }
 
-    /// Buckets currently held (for tests and metrics).
+    /// Keys currently held (for tests and metrics).
     pub fn len(&self) -> usize {
-        self.lock().map.len()
+        self.keys.len()
     }
 
     pub fn is_empty(&self) -> bool {
-        self.len() == 0
+        self.keys.is_empty()
     }
 
-    fn lock(&self) -> std::sync::MutexGuard<'_, Buckets> {
-        // A panic while holding the lock cannot leave a bucket half-updated in a way that
-        // matters (two plain numbers), so a poisoned lock is used as is.
-        self.buckets.lock().unwrap_or_else(|e| e.into_inner())
-    }
-
-    /// How long a bucket must be idle to be full again.
-    fn refill_time(&self) -> Duration {
-        if self.rate > 0.0 && self.rate.is_finite() {
-            Duration::try_from_secs_f64(self.burst / self.rate).unwrap_or(Duration::MAX)
-        } else {
-            Duration::MAX
-        }
-    }
-
-    /// Take one token for `key`, or a 429 saying when the next one comes.
+    /// Take one request for `key`, or a 429 saying when the next one is allowed.
     pub fn charge(&self, key: &str) -> Result<(), ApiError> {
-        self.charge_at(key, Instant::now())
-    }
-
-    /// [`RateLimiter::charge`] at a given instant (tests drive the clock).
-    pub fn charge_at(&self, key: &str, now: Instant) -> Result<(), ApiError> {
-        let mut b = self.lock();
-        if b.map.len() >= b.sweep_at && !b.map.contains_key(key) {
-            let full_after = self.refill_time();
-            b.map
-                .retain(|_, (_, last)| now.saturating_duration_since(*last) < full_after);
-            b.sweep_at = (b.map.len() * 2).max(b.min_sweep_at);
+        if self.keys.len() >= self.sweep_at.load(Ordering::Relaxed) {
+            self.keys.retain_recent();
+            let left = self.keys.len();
+            self.sweep_at
+                .store((left * 2).max(self.min_sweep_at), Ordering::Relaxed);
         }
-        let (tokens, last) = b.map.entry(key.to_string()).or_insert((self.burst, now));
-        let idle = now.saturating_duration_since(*last).as_secs_f64();
-        *tokens = (*tokens + idle * self.rate).min(self.burst);
-        *last = now;
-        if *tokens >= 1.0 {
-            *tokens -= 1.0;
-            Ok(())
-        } else {
-            let wait = ((1.0 - *tokens) / self.rate).ceil();
-            let wait = if wait.is_finite() { wait as u64 } else { 3600 };
-            Err(ApiError::new(
-                StatusCode::TOO_MANY_REQUESTS,
-                "rate-limited",
-                "Too many requests",
-                format!(
-                    "this key may send {} requests per second (bursts of {}); retry after {} s",
-                    self.rate,
-                    self.burst,
-                    wait.max(1)
-                ),
-            )
-            .with("limit_per_second", self.rate)
-            .retry_after(wait))
-        }
+        let Err(not_until) = self.keys.check_key(&key.to_string()) else {
+            return Ok(());
+        };
+        let now = self.keys.clock().now();
+        let wait = not_until.wait_time_from(now).as_secs_f64().ceil().max(1.0) as u64;
+        Err(ApiError::new(
+            StatusCode::TOO_MANY_REQUESTS,
+            "rate-limited",
+            "Too many requests",
+            format!(
+                "this key may send {} requests per second (bursts of {}); retry after {wait} s",
+                self.rate, self.burst
+            ),
+        )
+        .with("limit_per_second", self.rate)
+        .retry_after(wait))
     }
 }
 
 #[cfg(test)]
 mod tests {
+    use governor::clock::FakeRelativeClock;
+
     use super::*;
 
-    #[test]
-    fn a_key_gets_its_burst_then_429_and_refills() {
-        let l = RateLimiter::new(2.0, 3.0);
-        let t0 = Instant::now();
-        for _ in 0..3 {
-            assert!(l.charge_at("a", t0).is_ok());
-        }
-        let e = l.charge_at("a", t0).unwrap_err();
-        assert_eq!(e.status, StatusCode::TOO_MANY_REQUESTS);
-        // Another key is not limited by the first.
-        assert!(l.charge_at("b", t0).is_ok());
-        // Half a second later one token is back (2 per second).
-        assert!(l.charge_at("a", t0 + Duration::from_millis(500)).is_ok());
-        assert!(l.charge_at("a", t0 + Duration::from_millis(500)).is_err());
+    fn limiter(
+        rate: f64,
+        burst: f64,
+        sweep_at: usize,
+    ) -> (RateLimiter<FakeRelativeClock>, FakeRelativeClock) {
+        let clock = FakeRelativeClock::default();
+        (
+            RateLimiter::with_clock(rate, burst, sweep_at, clock.clone()),
+            clock,
+        )
     }
 
     #[test]
-    fn idle_buckets_are_evicted_and_the_map_stays_bounded() {
-        // burst 4 at 2 per second: a bucket idle for 2 s is full again.
-        let l = RateLimiter::with_sweep_at(2.0, 4.0, 8);
-        let t0 = Instant::now();
-        for i in 0..8 {
-            l.charge_at(&format!("old-{i}"), t0).unwrap();
-        }
-        assert_eq!(l.len(), 8);
-        // Two of them stay busy.
-        let t1 = t0 + Duration::from_secs(1);
-        for _ in 0..4 {
-            // old-0 is full again (3 + 2 tokens, capped at 4) and spends all four.
-            l.charge_at("old-0", t1).unwrap();
-        }
-        l.charge_at("old-1", t1).unwrap();
-        // 2.5 s after the start: the six others have been idle long enough to be full again
-        // and are swept when a new key arrives; the two busy ones are kept (idle 1.5 s).
-        let t2 = t0 + Duration::from_millis(2500);
-        l.charge_at("new", t2).unwrap();
-        assert_eq!(l.len(), 3, "old-0, old-1 and new remain");
-        // A kept bucket keeps its state: old-0 was empty at t1 and has refilled 3 tokens
-        // (1.5 s × 2 per second), not the 4 of a new bucket.
+    fn a_key_gets_its_burst_then_429_and_refills() {
+        let (l, clock) = limiter(2.0, 3.0, SWEEP_AT);
         for _ in 0..3 {
-            l.charge_at("old-0", t2).unwrap();
+            assert!(l.charge("a").is_ok());
         }
-        assert!(l.charge_at("old-0", t2).is_err());
-        // An evicted key starts from a full bucket, the same as if it had been kept.
-        for _ in 0..4 {
-            l.charge_at("old-5", t2).unwrap();
-        }
-        assert!(l.charge_at("old-5", t2).is_err());
+        let e = l.charge("a").unwrap_err();
+        assert_eq!(e.status, StatusCode::TOO_MANY_REQUESTS);
+        assert_eq!(e.slug, "rate-limited");
+        // The next request is allowed in 0.5 s: Retry-After rounds up to whole seconds.
+        assert_eq!(e.retry_after, Some(1));
+        assert_eq!(e.extra["limit_per_second"], 2.0);
+        assert_eq!(
+            e.detail,
+            "this key may send 2 requests per second (bursts of 3); retry after 1 s"
+        );
+        // Another key is not limited by the first.
+        assert!(l.charge("b").is_ok());
+        // Half a second later one request is allowed again (2 per second).
+        clock.advance(Duration::from_millis(500));
+        assert!(l.charge("a").is_ok());
+        assert!(l.charge("a").is_err());
+    }
 
-        // Many keys, each used once, 3 s apart in waves: the map never passes the threshold
-        // by more than one wave.
-        let l = RateLimiter::with_sweep_at(2.0, 4.0, 100);
+    #[test]
+    fn retry_after_is_the_wait_for_the_next_request_and_a_fractional_burst_rounds_down() {
+        let (l, clock) = limiter(0.5, 2.7, SWEEP_AT);
+        assert!(l.charge("a").is_ok() && l.charge("a").is_ok());
+        assert_eq!(l.charge("a").unwrap_err().retry_after, Some(2));
+        clock.advance(Duration::from_millis(1500));
+        assert_eq!(l.charge("a").unwrap_err().retry_after, Some(1));
+        clock.advance(Duration::from_millis(500));
+        assert!(l.charge("a").is_ok());
+    }
+
+    #[test]
+    fn idle_keys_are_evicted_and_the_map_stays_bounded() {
+        // burst 4 at 2 per second; sweeping once 4 keys are held.
+        let (l, clock) = limiter(2.0, 4.0, 4);
+        for _ in 0..4 {
+            l.charge("busy").unwrap();
+        }
+        for k in ["a", "b", "c"] {
+            l.charge(k).unwrap();
+        }
+        assert_eq!(l.len(), 4);
+        // 1.5 s later a, b and c are full again and swept when the next key comes; `busy`
+        // has 3 of its 4 back and is kept.
+        clock.advance(Duration::from_millis(1500));
+        l.charge("new").unwrap();
+        assert_eq!(l.len(), 2, "busy and new remain");
+        // A kept key keeps its state: 3 requests, not the 4 of a new key.
+        for _ in 0..3 {
+            l.charge("busy").unwrap();
+        }
+        assert!(l.charge("busy").is_err());
+        // An evicted key starts from a full burst, the same as if it had been kept.
+        for _ in 0..4 {
+            l.charge("a").unwrap();
+        }
+        assert!(l.charge("a").is_err());
+
+        // Many keys, each used once, 3 s apart in waves: the map never passes the threshold.
+        let (l, clock) = limiter(2.0, 4.0, 100);
         let mut max_len = 0;
-        for wave in 0..50u64 {
-            let t = t0 + Duration::from_secs(3 * wave);
+        for wave in 0..50 {
+            clock.advance(Duration::from_secs(3));
             for i in 0..60 {
-                l.charge_at(&format!("k-{wave}-{i}"), t).unwrap();
+                l.charge(&format!("k-{wave}-{i}")).unwrap();
                 max_len = max_len.max(l.len());
             }
         }
-        assert!(max_len <= 100, "the map grew to {max_len} buckets");
+        assert!(max_len <= 100, "the map grew to {max_len} keys");
+        assert!(max_len > 60, "a sweep was needed: {max_len}");
     }
 }

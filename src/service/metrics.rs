@@ -1,5 +1,15 @@
 //! Prometheus text exposition (format 0.0.4) from in-process counters: no registry crate, the
 //! handful of series the service needs.
+//!
+//! Hand-written, not `prometheus-client` (checked with 0.26.0): its encoder writes OpenMetrics,
+//! not the 0.0.4 text `/metrics` serves (`text/plain; version=0.0.4`, `health.rs`) and
+//! openapi.yaml and docs/service.md describe. Its output differs in the series' own lines: a
+//! counter's `# TYPE`/`# HELP` name the family without `_total` (`# TYPE
+//! gearwear_http_requests counter`), every help text gets a `.` appended, the histogram's
+//! bounds are written `le="1.0"`/`le="10.0"` where these are `le="1"`/`le="10"` (a new series
+//! to anything keyed on the label), and the text ends in `# EOF`. Moving to it is a change of
+//! the exposition format, to be made as one, not under a refactoring. The MQTT series
+//! (`mqtt/metrics.rs`) are written the same way, into the same text.
 
 use std::collections::BTreeMap;
 use std::fmt::Write;

@@ -266,6 +266,12 @@ pub async fn deliveries(
 }
 
 /// Back-off before attempt `attempt + 1`: `base · 2^(attempt − 1)`, capped.
+///
+/// Hand-written, not `backon`'s: a delivery's attempts are spread over worker runs, replicas
+/// and restarts, so the schedule's position (the attempt count) and the next attempt's time
+/// live in the database, where `backon`'s in-process retry cannot keep them; and `backon`'s
+/// exponential schedule multiplies in `f32`, so a 700 ms base's second wait is 1.399999976 s,
+/// stored as 1399 ms, where this gives 1400 ms.
 pub fn backoff(base: Duration, max: Duration, attempt: i64) -> Duration {
     let f = 2f64.powi((attempt - 1).clamp(0, 30) as i32);
     base.mul_f64(f).min(max)

@@ -1,5 +1,13 @@
-//! Enums whose variants are words of the API and the database ([`words!`]): each is written
-//! and read as its word, and compared as a value, never as text.
+//! Enums whose variants are words of the API and the database: each is written and read as its
+//! word, and compared as a value, never as text. The error of a word that names none,
+//! [`UnknownWord`], lists those that do.
+//!
+//! New enums derive `strum`'s `Display`, `EnumString` (with `parse_err_ty = UnknownWord`),
+//! `IntoStaticStr`, `VariantArray` and `VariantNames`, as
+//! [`TableStatus`](crate::signature::TableStatus) does. The [`words!`] macro stays only for
+//! the alert's [`Level`](crate::assessment::Level) and [`Basis`](crate::assessment::Basis)
+//! until they move to `strum` too (their module, `assessment/`, is being changed elsewhere;
+//! the move is the same as `TableStatus`'s, and their words the same as their `serde` names).
 
 /// A word that names no variant of the type.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]

@@ -29,6 +29,7 @@ use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use axum::http::StatusCode;
+use backon::{BackoffBuilder, ExponentialBuilder};
 use rumqttc::{AsyncClient, Event, MqttOptions, Packet, Publish, QoS};
 use tokio::sync::{Semaphore, watch};
 use tokio::task::JoinSet;
@@ -45,6 +46,18 @@ pub use topic::TopicFilter;
 pub const MIN_BACKOFF: Duration = Duration::from_millis(100);
 /// Longest wait between connection attempts.
 pub const MAX_BACKOFF: Duration = Duration::from_secs(10);
+/// The waits between connection attempts, and between attempts to store a record while the
+/// store is unavailable: [`MIN_BACKOFF`] doubling to [`MAX_BACKOFF`], for as long as it takes.
+///
+/// `backon` gives the schedule; both loops that wait on it stay here, because their wait must
+/// end when the service stops while the attempt it separates must not be cut: the connection's
+/// event loop is polled, not retried as a future, and a record being stored is not dropped
+/// mid-write — `backon`'s `Retryable` races nothing but its sleep.
+pub const BACKOFF: ExponentialBuilder = ExponentialBuilder::new()
+    .with_min_delay(MIN_BACKOFF)
+    .with_max_delay(MAX_BACKOFF)
+    .with_factor(2.0)
+    .without_max_times();
 /// Records assessed and stored at once. A broker may hand over its whole queue for the
 /// session at once (mosquitto does after a restart); the rest wait for a slot (their payloads
 /// held in memory) instead of all competing for the CPU and the store's connections, where
@@ -77,7 +90,7 @@ pub async fn run(app: AppState, s: MqttSettings, mut stop: watch::Receiver<bool>
     let (client, mut events) = AsyncClient::new(options(&s, max_payload), 64);
     let mut tasks = JoinSet::new();
     let ingesting = Arc::new(Semaphore::new(CONCURRENT_RECORDS));
-    let mut backoff = MIN_BACKOFF;
+    let mut backoff = BACKOFF.build();
     tracing::info!(host = %s.host, port = s.port, topic = %s.filter.subscription, "MQTT ingest");
     loop {
         while tasks.try_join_next().is_some() {}
@@ -87,7 +100,7 @@ pub async fn run(app: AppState, s: MqttSettings, mut stop: watch::Receiver<bool>
         };
         match ev {
             Ok(Event::Incoming(Packet::ConnAck(c))) => {
-                backoff = MIN_BACKOFF;
+                backoff = BACKOFF.build();
                 metrics.connections.fetch_add(1, Ordering::Relaxed);
                 tracing::info!(session_present = c.session_present, "MQTT connected");
                 // Subscribe after every connection (a broker without persistence forgets
@@ -125,12 +138,12 @@ pub async fn run(app: AppState, s: MqttSettings, mut stop: watch::Receiver<bool>
             Ok(_) => {}
             Err(e) => {
                 metrics.set_connected(false);
-                tracing::warn!(error = %e, retry_in_ms = backoff.as_millis() as u64, "MQTT connection lost");
+                let wait = backoff.next().unwrap_or(MAX_BACKOFF);
+                tracing::warn!(error = %e, retry_in_ms = wait.as_millis() as u64, "MQTT connection lost");
                 tokio::select! {
                     _ = stop.changed() => break,
-                    _ = tokio::time::sleep(backoff) => {}
+                    _ = tokio::time::sleep(wait) => {}
                 }
-                backoff = (backoff * 2).min(MAX_BACKOFF);
             }
         }
     }
@@ -182,7 +195,7 @@ impl Message {
     /// acknowledge (not when the service stops first: the broker redelivers it).
     async fn handle(mut self, p: Publish) {
         let metrics = &self.app.metrics.mqtt;
-        let mut backoff = MIN_BACKOFF;
+        let mut backoff = BACKOFF.build();
         let _slot = tokio::select! {
             _ = self.stop.changed() => return,
             slot = self.ingesting.clone().acquire_owned() => slot,
@@ -191,11 +204,11 @@ impl Message {
             match ingest(&self.app, &self.settings.filter, &p).await {
                 Err((e, _)) if e.status == StatusCode::SERVICE_UNAVAILABLE => {
                     tracing::warn!(topic = %p.topic, error = %e.detail, "MQTT record: store unavailable, retrying");
+                    let wait = backoff.next().unwrap_or(MAX_BACKOFF);
                     tokio::select! {
                         _ = self.stop.changed() => return,
-                        _ = tokio::time::sleep(backoff) => {}
+                        _ = tokio::time::sleep(wait) => {}
                     }
-                    backoff = (backoff * 2).min(MAX_BACKOFF);
                 }
                 r => break r,
             }
@@ -292,5 +305,25 @@ fn duplicate(idem: &Idempotency, prev: &crate::store::IdemRow, id: &str) -> ApiR
                  payload; give each record its own `record_id`"
             ),
         ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_back_off_starts_at_100_ms_doubles_and_stays_at_10_s() {
+        let got: Vec<Duration> = BACKOFF.build().take(12).collect();
+        let want = [
+            0.1, 0.2, 0.4, 0.8, 1.6, 3.2, 6.4, 10.0, 10.0, 10.0, 10.0, 10.0,
+        ];
+        assert_eq!(got.len(), want.len(), "the schedule does not end");
+        for (g, w) in got.iter().zip(want) {
+            // `backon` multiplies in f32: within a microsecond of the doubling.
+            assert!((g.as_secs_f64() - w).abs() < 1e-6, "{got:?}");
+        }
+        assert_eq!(got[0], MIN_BACKOFF);
+        assert_eq!(got[11], MAX_BACKOFF);
     }
 }
