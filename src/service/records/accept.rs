@@ -19,6 +19,7 @@ use crate::gearbox::Gearbox;
 use crate::service::AppState;
 use crate::service::context::MachineContext;
 use crate::service::error::{ApiError, ApiResult, problem_from_error};
+use crate::service::evidence::{Undrawn, stored_evidence};
 use crate::service::machines::DEFAULT_TACHO_CHANNEL;
 use crate::service::metrics::StageClock;
 use crate::service::spectrum::{PlotSpectrum, plot_from_spectrum, plot_spectrum};
@@ -110,6 +111,7 @@ pub async fn accept(
         clock: job_clock,
         gearbox_row,
         gearbox,
+        undrawn,
     } = tokio::task::spawn_blocking(move || job.run())
         .await
         .map_err(|e| ApiError::internal(format!("the diagnosis task failed: {e}")))?
@@ -131,6 +133,8 @@ pub async fn accept(
     let body = serde_json::to_string(&assessment)
         .map_err(|e| ApiError::internal(format!("the assessment did not serialise: {e}")))?;
     let response_text = answer(&body, &ids, machine_id, assessment.level());
+    let keeps_raw = !app.settings.raw_retention.is_zero();
+    let evidence = stored_evidence(&assessment, undrawn.as_ref(), keeps_raw);
     let mut ing = Ingest {
         record: record_row(
             app,
@@ -147,12 +151,13 @@ pub async fn accept(
                 &assessment,
                 body,
                 spectrum.as_ref(),
+                evidence,
                 &ids,
                 machine_id,
                 measured_at(&dec, &ids),
             ),
             &again,
-            !app.settings.raw_retention.is_zero(),
+            keeps_raw,
         ),
         idempotency: idem.row(&response_text),
         event_extras: event_extras(&assessment),
@@ -333,7 +338,8 @@ pub(super) struct AssessJob {
 }
 
 /// What [`AssessJob::run`] gives back: the record, its assessment, the spectrum plot, the
-/// stages' clock, and the gearbox it was assessed with.
+/// stages' clock, the gearbox it was assessed with, and what drawing its evidence plot later
+/// needs (when it has one).
 pub(super) struct Assessed {
     pub dec: Decoded,
     pub assessment: Assessment,
@@ -341,6 +347,7 @@ pub(super) struct Assessed {
     pub clock: StageClock,
     pub gearbox_row: GearboxRow,
     pub gearbox: Arc<Gearbox>,
+    pub undrawn: Option<Undrawn>,
 }
 
 impl RecordRequest {
@@ -450,6 +457,17 @@ impl AssessJob {
         )?;
         let samples = &self.dec.channels[self.chosen[a.deciding]].1;
         let spectrum = plot(&a, samples, &facts, &ctx.gearbox, ctx.input_shaft_hz());
+        let undrawn = a.evidence_plot.as_ref().map(|p| Undrawn {
+            chosen: self.chosen.clone(),
+            deciding: self.chosen[a.deciding],
+            channel: p.channel.clone(),
+            tacho: facts.tacho.map(|t| (t.name, t.pulses_per_rev)),
+            shaft_hz: facts.shaft_hz,
+            input_shaft_hz: ctx.input_shaft_hz(),
+            load: facts.load,
+            gearbox_id: ctx.gearbox_row.id.clone(),
+            gearbox_hash: ctx.gearbox_row.hash.clone(),
+        });
         clock.lap("plot");
         Ok(Assessed {
             dec: self.dec,
@@ -458,6 +476,7 @@ impl AssessJob {
             clock,
             gearbox_row: self.ctx.gearbox_row,
             gearbox: self.ctx.gearbox,
+            undrawn,
         })
     }
 }

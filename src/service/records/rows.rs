@@ -100,11 +100,12 @@ pub(super) fn record_row(
 }
 
 /// The diagnosis's row: the assessment as answered (`body`), the wear its trend follows, the
-/// spectrum plot.
+/// spectrum plot, the `evidence` text ([`crate::service::evidence::stored_evidence`]).
 pub(crate) fn diagnosis_row(
     a: &Assessment,
     body: String,
     spectrum: Option<&PlotSpectrum>,
+    evidence: String,
     ids: &Ids,
     machine_id: &str,
     measured_at: i64,
@@ -131,7 +132,7 @@ pub(crate) fn diagnosis_row(
         motion_state: motion,
         body,
         spectrum: serde_json::to_string(&spectrum).unwrap_or_else(|_| "null".into()),
-        evidence: serde_json::to_string(&a.evidence_plot).unwrap_or_else(|_| "null".into()),
+        evidence,
         has_wear: wear.is_some(),
         novelty_score: decide.novelty.as_ref().map(|n| n.score),
         novelty_threshold: decide.novelty.as_ref().map(|n| n.threshold),
