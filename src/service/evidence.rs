@@ -49,11 +49,11 @@ pub struct Undrawn {
     pub gearbox_hash: String,
 }
 
-/// The `evidence` text a diagnosis is stored with: the [`Undrawn`] note when the assessment
-/// has a plot and the record's raw samples are kept (the plot is drawn when first asked for),
-/// else the plot itself (or `null`).
+/// The `evidence` text a diagnosis is stored with: the [`Undrawn`] note when the record has a
+/// plot to draw and its raw samples are kept (the plot is drawn when first asked for), else the
+/// assessment's plot (or `null`).
 pub fn stored_evidence(a: &Assessment, undrawn: Option<&Undrawn>, keeps_raw: bool) -> String {
-    match undrawn.filter(|_| keeps_raw && a.evidence_plot.is_some()) {
+    match undrawn.filter(|_| keeps_raw) {
         Some(u) => json!({ "undrawn": u }).to_string(),
         None => serde_json::to_string(&a.evidence_plot).unwrap_or_else(|_| "null".into()),
     }

@@ -448,6 +448,9 @@ impl AssessJob {
             thresholds: self.thresholds,
             units: std::mem::take(&mut self.units),
         };
+        // The core's `assess` also draws the evidence plot. With raw samples kept the plot is
+        // not stored here but drawn when first asked for (`service::evidence`): until the core
+        // offers the assessment without the plot, the drawing on the path is thrown away.
         let a = assess(
             &mut self.dec.channels,
             &self.chosen,
@@ -457,10 +460,13 @@ impl AssessJob {
         )?;
         let samples = &self.dec.channels[self.chosen[a.deciding]].1;
         let spectrum = plot(&a, samples, &facts, &ctx.gearbox, ctx.input_shaft_hz());
-        let undrawn = a.evidence_plot.as_ref().map(|p| Undrawn {
+        // The plot is drawn where the record's state is measured on a described machine
+        // (the core's rule); what drawing it later needs.
+        let deciding = self.chosen[a.deciding];
+        let undrawn = (machine.described && a.operating_state.is_some()).then(|| Undrawn {
             chosen: self.chosen.clone(),
-            deciding: self.chosen[a.deciding],
-            channel: p.channel.clone(),
+            deciding,
+            channel: self.dec.channels[deciding].0.clone(),
             tacho: facts.tacho.map(|t| (t.name, t.pulses_per_rev)),
             shaft_hz: facts.shaft_hz,
             input_shaft_hz: ctx.input_shaft_hz(),
