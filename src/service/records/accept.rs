@@ -120,8 +120,10 @@ pub async fn accept(
         assessment.warn(note);
     }
     clock.absorb(job_clock);
-    clock.skip();
     let table_speed = table_miss(app, machine_id, &gearbox_row, &gearbox, &mut assessment).await?;
+    // The stages are thread CPU time, booked only between awaits: the task may have moved to
+    // another thread, whose other work would be booked too.
+    clock.skip();
 
     let ids = Ids {
         now: now_ms(),
@@ -169,6 +171,7 @@ pub async fn accept(
         }),
         table_speed,
     };
+    clock.lap("assemble");
     // The webhook payloads carry the machine's wear trend with this record in it: a read of
     // the history and a bootstrapped fit (≈ 10 ms of CPU at 200 points), so only when a
     // webhook will receive a diagnosis payload.
@@ -176,13 +179,17 @@ pub async fn accept(
         let trend = crate::service::trend::summary_with(app, &ing.diagnosis).await;
         ing.event_extras.insert("trend_summary".into(), trend);
     }
-    clock.lap("assemble");
-    if let Some(prev) = store(app, ing, idem).await? {
-        return Ok(Accepted::Replayed(prev));
-    }
+    let queued = match store(app, ing, idem).await? {
+        Ok(queued) => queued,
+        Err(prev) => return Ok(Accepted::Replayed(prev)),
+    };
     app.metrics.records_accepted.fetch_add(1, Ordering::Relaxed);
     app.metrics.stages(&clock);
-    app.webhook_wake.notify_one();
+    // The webhook worker is woken for the deliveries this record queued (none without
+    // subscriptions); it polls for the rest.
+    if queued > 0 {
+        app.webhook_wake.notify_one();
+    }
     let ea = assessment.wear().map(|w| w.estimate);
     tracing::info!(machine = machine_id, diagnosis = %ids.diagnosis_id, ea, alert_level = %assessment.level(), "record accepted");
     Ok(Accepted::Created {
@@ -241,13 +248,17 @@ pub(super) fn with_reread(mut d: DiagnosisRow, again: &RereadRequest, keeps: boo
 }
 
 /// The store calls of one accepted record: its rows in one transaction (the group-commit
-/// queue); `Some(answer)` when a concurrent request with the same idempotency key committed
-/// first (its stored answer).
-async fn store(app: &AppState, ing: Ingest, idem: &Idempotency) -> ApiResult<Option<IdemRow>> {
+/// queue), `Ok(deliveries queued)`; `Err(answer)` when a concurrent request with the same
+/// idempotency key committed first (its stored answer).
+async fn store(
+    app: &AppState,
+    ing: Ingest,
+    idem: &Idempotency,
+) -> ApiResult<Result<usize, IdemRow>> {
     match app.ingest_queue.ingest(ing).await {
-        Ok(()) => Ok(None),
+        Ok(queued) => Ok(Ok(queued)),
         Err(StoreError::Conflict(_)) if idem.key.is_some() => match idem.stored(app).await? {
-            Some(prev) => Ok(Some(prev)),
+            Some(prev) => Ok(Err(prev)),
             None => Err(ApiError::internal(
                 "idempotency conflict without a stored answer",
             )),
