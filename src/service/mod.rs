@@ -279,10 +279,24 @@ async fn retention_task(app: AppState, mut stop: watch::Receiver<bool>) {
     loop {
         if !keep.is_zero() {
             let before = crate::store::now_ms() - keep.as_millis() as i64;
-            match app.store.purge_samples(before).await {
-                Ok(n) if n > 0 => tracing::info!(records = n, "raw samples past retention dropped"),
-                Ok(_) => {}
-                Err(e) => tracing::warn!(error = %e, "retention: store unavailable"),
+            // The plots not drawn yet are drawn from the samples while they are there; the
+            // samples are kept until they are.
+            match evidence::draw_before_purge(&app, before).await {
+                Ok(n) => {
+                    if n > 0 {
+                        tracing::info!(records = n, "evidence plots drawn before retention");
+                    }
+                    match app.store.purge_samples(before).await {
+                        Ok(n) if n > 0 => {
+                            tracing::info!(records = n, "raw samples past retention dropped")
+                        }
+                        Ok(_) => {}
+                        Err(e) => tracing::warn!(error = %e, "retention: store unavailable"),
+                    }
+                }
+                Err(e) => {
+                    tracing::warn!(error = %e.detail, "retention: evidence plots not drawn, samples kept")
+                }
             }
         }
         let before = crate::store::now_ms() - app.settings.idempotency_retention.as_millis() as i64;

@@ -11,6 +11,7 @@ mod browser;
 mod calibration;
 mod cli;
 mod doors;
+mod evidence;
 mod faults;
 mod gearboxes;
 mod lifecycle;

@@ -528,7 +528,7 @@ async fn concurrent_records_share_commits_and_are_each_stored_once(b: Backend) {
     let mut conflicts = 0;
     for t in tasks {
         match t.await.unwrap() {
-            Ok(()) => ok += 1,
+            Ok(_) => ok += 1,
             Err(StoreError::Conflict(_)) => conflicts += 1,
             Err(e) => panic!("unexpected store error: {e}"),
         }

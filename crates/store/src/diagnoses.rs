@@ -98,6 +98,19 @@ pub trait DiagnosisStore: Send + Sync {
     /// A stored record with its raw samples (`None` when they were not kept), for a re-read
     /// (`sha256` is left empty).
     async fn stored_record(&self, record_id: &str) -> StoreResult<Option<super::NewRecord>>;
+    /// Replace a diagnosis's `evidence` text `from` with `to` (the record page's plot, drawn
+    /// when first asked for); false when it is no longer `from` (another request or replica
+    /// drew it first).
+    async fn set_evidence(&self, diagnosis_id: &str, from: &str, to: &str) -> StoreResult<bool>;
+    /// At most `limit` diagnoses (full rows) whose `evidence` starts with `prefix` (not drawn
+    /// yet) and whose record, received before `before`, still has its raw samples: what is
+    /// drawn before the retention drops those samples.
+    async fn undrawn_evidence(
+        &self,
+        prefix: &str,
+        before: i64,
+        limit: i64,
+    ) -> StoreResult<Vec<DiagnosisRow>>;
 }
 
 /// The SQL of [`DiagnosisStore`] for one backend: `$store` is the store type, `$db` its
@@ -300,6 +313,43 @@ macro_rules! diagnoses_sql {
                 .fetch_all(&self.pool)
                 .await?;
                 rows.iter().map(|r| Ok(r.try_get("id")?)).collect()
+            }
+
+            async fn set_evidence(
+                &self,
+                diagnosis_id: &str,
+                from: &str,
+                to: &str,
+            ) -> StoreResult<bool> {
+                let r = sqlx::query(
+                    "UPDATE diagnoses SET evidence = $3 WHERE id = $1 AND evidence = $2",
+                )
+                .bind(diagnosis_id)
+                .bind(from)
+                .bind(to)
+                .execute(&self.pool)
+                .await?;
+                Ok(r.rows_affected() == 1)
+            }
+
+            async fn undrawn_evidence(
+                &self,
+                prefix: &str,
+                before: i64,
+                limit: i64,
+            ) -> StoreResult<Vec<DiagnosisRow>> {
+                let rows = sqlx::query(
+                    "SELECT d.* FROM records r JOIN diagnoses d \
+                     ON d.machine_id = r.machine_id AND d.record_id = r.id \
+                     WHERE r.received_at < $1 AND r.samples IS NOT NULL \
+                     AND d.evidence LIKE $2 ORDER BY d.seq LIMIT $3",
+                )
+                .bind(before)
+                .bind(format!("{prefix}%"))
+                .bind(limit)
+                .fetch_all(&self.pool)
+                .await?;
+                rows.iter().map(|r| diagnosis_row(r, true)).collect()
             }
 
             async fn stored_record(&self, record_id: &str) -> StoreResult<Option<NewRecord>> {

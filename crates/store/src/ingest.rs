@@ -118,13 +118,14 @@ pub fn diagnosis_event(
 #[async_trait]
 pub trait IngestStore: Send + Sync {
     async fn get_idempotent(&self, key_id: &str, idem_key: &str) -> StoreResult<Option<IdemRow>>;
-    /// Write an accepted record in one transaction. `StoreError::Conflict` when the
-    /// idempotency key was stored meanwhile by a concurrent request.
-    async fn ingest(&self, ing: &Ingest) -> StoreResult<()>;
+    /// Write an accepted record in one transaction; how many webhook deliveries it queued.
+    /// `StoreError::Conflict` when the idempotency key was stored meanwhile by a concurrent
+    /// request.
+    async fn ingest(&self, ing: &Ingest) -> StoreResult<usize>;
     /// Write several accepted records in ONE transaction (one commit, one fsync — group
     /// commit), each in its own savepoint: the result of each, in order. When the commit
     /// fails, every record gets that error and none is stored.
-    async fn ingest_batch(&self, ings: &[Ingest]) -> Vec<StoreResult<()>>;
+    async fn ingest_batch(&self, ings: &[Ingest]) -> Vec<StoreResult<usize>>;
     /// Store a re-read in one transaction: the pending diagnosis it replaces marked `done`
     /// (compare-and-set: `false`, and nothing written, when it is no longer pending — another
     /// replica stored its re-read), the new diagnosis, the record's new features (a baseline
@@ -148,8 +149,12 @@ macro_rules! ingest_sql {
         use sqlx::Row;
         use $crate::*;
 
-        /// Every write of one accepted record, inside the caller's transaction.
-        async fn ingest_in(tx: &mut sqlx::Transaction<'_, $db>, ing: &Ingest) -> StoreResult<()> {
+        /// Every write of one accepted record, inside the caller's transaction; how many
+        /// webhook deliveries it queued.
+        async fn ingest_in(
+            tx: &mut sqlx::Transaction<'_, $db>,
+            ing: &Ingest,
+        ) -> StoreResult<usize> {
             let (rec, d) = (&ing.record, &ing.diagnosis);
             lock_machine(tx, ing).await?;
             if let Some(i) = &ing.idempotency {
@@ -382,9 +387,9 @@ macro_rules! ingest_sql {
                 .transpose()
             }
 
-            async fn ingest(&self, ing: &Ingest) -> StoreResult<()> {
+            async fn ingest(&self, ing: &Ingest) -> StoreResult<usize> {
                 let mut tx = self.pool.begin().await?;
-                ingest_in(&mut tx, ing).await?;
+                let queued = ingest_in(&mut tx, ing).await?;
                 tx.commit().await.map_err(|e| {
                     if is_unique_violation(&e) {
                         StoreError::Conflict("idempotency key".into())
@@ -392,10 +397,10 @@ macro_rules! ingest_sql {
                         e.into()
                     }
                 })?;
-                Ok(())
+                Ok(queued)
             }
 
-            async fn ingest_batch(&self, ings: &[Ingest]) -> Vec<StoreResult<()>> {
+            async fn ingest_batch(&self, ings: &[Ingest]) -> Vec<StoreResult<usize>> {
                 if ings.len() == 1 {
                     return vec![self.ingest(&ings[0]).await];
                 }
@@ -415,9 +420,9 @@ macro_rules! ingest_sql {
                     // key) is rolled back alone and answered with its own error.
                     let r = async {
                         let mut sp = sqlx::Acquire::begin(&mut *tx).await?;
-                        ingest_in(&mut sp, ing).await?;
+                        let queued = ingest_in(&mut sp, ing).await?;
                         sp.commit().await?;
-                        Ok::<(), StoreError>(())
+                        Ok::<usize, StoreError>(queued)
                     }
                     .await;
                     out.push(r);

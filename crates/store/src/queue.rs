@@ -16,7 +16,7 @@ use tokio::sync::{mpsc, oneshot};
 
 use super::{Ingest, Store, StoreError, StoreResult};
 
-type Job = (Ingest, oneshot::Sender<StoreResult<()>>);
+type Job = (Ingest, oneshot::Sender<StoreResult<usize>>);
 
 /// The queue in front of [`Store::ingest`]. Cheap to clone; the writer task ends when the last
 /// clone is dropped (after the records already queued are written).
@@ -42,8 +42,9 @@ impl IngestQueue {
         IngestQueue { store, tx }
     }
 
-    /// Write one accepted record; returns when it is committed (or failed).
-    pub async fn ingest(&self, ing: Ingest) -> StoreResult<()> {
+    /// Write one accepted record; returns when it is committed (or failed), with how many
+    /// webhook deliveries it queued.
+    pub async fn ingest(&self, ing: Ingest) -> StoreResult<usize> {
         let Some(tx) = &self.tx else {
             return self.store.ingest(&ing).await;
         };

@@ -99,20 +99,26 @@ macro_rules! webhooks_sql {
         /// Queue each event for every live subscription that asked for it, inside the
         /// caller's transaction (so an event exists exactly when what raised it is
         /// committed); `now` is the deliveries' creation and first due time. The payload
-        /// column holds the typed event; the webhook worker renders it.
+        /// column holds the typed event; the webhook worker renders it. Returns how many
+        /// deliveries it queued.
         pub(crate) async fn queue_events(
             tx: &mut sqlx::Transaction<'_, $db>,
             events: &[$crate::events::QueuedEvent],
             now: i64,
-        ) -> StoreResult<()> {
+        ) -> StoreResult<usize> {
             let hooks = sqlx::query("SELECT * FROM webhooks WHERE deleted_at IS NULL")
                 .fetch_all(&mut **tx)
                 .await?;
+            if hooks.is_empty() {
+                // Nothing to deliver: the events are not written out.
+                return Ok(0);
+            }
             let events = events
                 .iter()
                 .map(|q| Ok((q.event.name(), serde_json::to_string(q)?)))
                 .collect::<Result<Vec<_>, serde_json::Error>>()
                 .map_err(|e| StoreError::Decode(format!("an event cannot be written: {e}")))?;
+            let mut queued = 0;
             for h in &hooks {
                 let h = webhook_row(h)?;
                 for (event, payload) in &events {
@@ -131,9 +137,10 @@ macro_rules! webhooks_sql {
                     .bind(now)
                     .execute(&mut **tx)
                     .await?;
+                    queued += 1;
                 }
             }
-            Ok(())
+            Ok(queued)
         }
 
         fn delivery_row(r: &<$db as sqlx::Database>::Row) -> StoreResult<DeliveryRow> {

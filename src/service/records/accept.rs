@@ -19,6 +19,7 @@ use crate::gearbox::Gearbox;
 use crate::service::AppState;
 use crate::service::context::MachineContext;
 use crate::service::error::{ApiError, ApiResult, problem_from_error};
+use crate::service::evidence::{Undrawn, stored_evidence};
 use crate::service::machines::DEFAULT_TACHO_CHANNEL;
 use crate::service::metrics::StageClock;
 use crate::service::spectrum::{PlotSpectrum, plot_from_spectrum, plot_spectrum};
@@ -110,6 +111,7 @@ pub async fn accept(
         clock: job_clock,
         gearbox_row,
         gearbox,
+        undrawn,
     } = tokio::task::spawn_blocking(move || job.run())
         .await
         .map_err(|e| ApiError::internal(format!("the diagnosis task failed: {e}")))?
@@ -118,8 +120,10 @@ pub async fn accept(
         assessment.warn(note);
     }
     clock.absorb(job_clock);
-    clock.skip();
     let table_speed = table_miss(app, machine_id, &gearbox_row, &gearbox, &mut assessment).await?;
+    // The stages are thread CPU time, booked only between awaits: the task may have moved to
+    // another thread, whose other work would be booked too.
+    clock.skip();
 
     let ids = Ids {
         now: now_ms(),
@@ -131,6 +135,8 @@ pub async fn accept(
     let body = serde_json::to_string(&assessment)
         .map_err(|e| ApiError::internal(format!("the assessment did not serialise: {e}")))?;
     let response_text = answer(&body, &ids, machine_id, assessment.level());
+    let keeps_raw = !app.settings.raw_retention.is_zero();
+    let evidence = stored_evidence(&assessment, undrawn.as_ref(), keeps_raw);
     let mut ing = Ingest {
         record: record_row(
             app,
@@ -147,12 +153,13 @@ pub async fn accept(
                 &assessment,
                 body,
                 spectrum.as_ref(),
+                evidence,
                 &ids,
                 machine_id,
                 measured_at(&dec, &ids),
             ),
             &again,
-            !app.settings.raw_retention.is_zero(),
+            keeps_raw,
         ),
         idempotency: idem.row(&response_text),
         event_extras: event_extras(&assessment),
@@ -164,6 +171,7 @@ pub async fn accept(
         }),
         table_speed,
     };
+    clock.lap("assemble");
     // The webhook payloads carry the machine's wear trend with this record in it: a read of
     // the history and a bootstrapped fit (≈ 10 ms of CPU at 200 points), so only when a
     // webhook will receive a diagnosis payload.
@@ -171,13 +179,17 @@ pub async fn accept(
         let trend = crate::service::trend::summary_with(app, &ing.diagnosis).await;
         ing.event_extras.insert("trend_summary".into(), trend);
     }
-    clock.lap("assemble");
-    if let Some(prev) = store(app, ing, idem).await? {
-        return Ok(Accepted::Replayed(prev));
-    }
+    let queued = match store(app, ing, idem).await? {
+        Ok(queued) => queued,
+        Err(prev) => return Ok(Accepted::Replayed(prev)),
+    };
     app.metrics.records_accepted.fetch_add(1, Ordering::Relaxed);
     app.metrics.stages(&clock);
-    app.webhook_wake.notify_one();
+    // The webhook worker is woken for the deliveries this record queued (none without
+    // subscriptions); it polls for the rest.
+    if queued > 0 {
+        app.webhook_wake.notify_one();
+    }
     let ea = assessment.wear().map(|w| w.estimate);
     tracing::info!(machine = machine_id, diagnosis = %ids.diagnosis_id, ea, alert_level = %assessment.level(), "record accepted");
     Ok(Accepted::Created {
@@ -236,13 +248,17 @@ pub(super) fn with_reread(mut d: DiagnosisRow, again: &RereadRequest, keeps: boo
 }
 
 /// The store calls of one accepted record: its rows in one transaction (the group-commit
-/// queue); `Some(answer)` when a concurrent request with the same idempotency key committed
-/// first (its stored answer).
-async fn store(app: &AppState, ing: Ingest, idem: &Idempotency) -> ApiResult<Option<IdemRow>> {
+/// queue), `Ok(deliveries queued)`; `Err(answer)` when a concurrent request with the same
+/// idempotency key committed first (its stored answer).
+async fn store(
+    app: &AppState,
+    ing: Ingest,
+    idem: &Idempotency,
+) -> ApiResult<Result<usize, IdemRow>> {
     match app.ingest_queue.ingest(ing).await {
-        Ok(()) => Ok(None),
+        Ok(queued) => Ok(Ok(queued)),
         Err(StoreError::Conflict(_)) if idem.key.is_some() => match idem.stored(app).await? {
-            Some(prev) => Ok(Some(prev)),
+            Some(prev) => Ok(Err(prev)),
             None => Err(ApiError::internal(
                 "idempotency conflict without a stored answer",
             )),
@@ -333,7 +349,8 @@ pub(super) struct AssessJob {
 }
 
 /// What [`AssessJob::run`] gives back: the record, its assessment, the spectrum plot, the
-/// stages' clock, and the gearbox it was assessed with.
+/// stages' clock, the gearbox it was assessed with, and what drawing its evidence plot later
+/// needs (when it has one).
 pub(super) struct Assessed {
     pub dec: Decoded,
     pub assessment: Assessment,
@@ -341,6 +358,7 @@ pub(super) struct Assessed {
     pub clock: StageClock,
     pub gearbox_row: GearboxRow,
     pub gearbox: Arc<Gearbox>,
+    pub undrawn: Option<Undrawn>,
 }
 
 impl RecordRequest {
@@ -441,6 +459,9 @@ impl AssessJob {
             thresholds: self.thresholds,
             units: std::mem::take(&mut self.units),
         };
+        // The core's `assess` also draws the evidence plot. With raw samples kept the plot is
+        // not stored here but drawn when first asked for (`service::evidence`): until the core
+        // offers the assessment without the plot, the drawing on the path is thrown away.
         let a = assess(
             &mut self.dec.channels,
             &self.chosen,
@@ -450,6 +471,20 @@ impl AssessJob {
         )?;
         let samples = &self.dec.channels[self.chosen[a.deciding]].1;
         let spectrum = plot(&a, samples, &facts, &ctx.gearbox, ctx.input_shaft_hz());
+        // The plot is drawn where the record's state is measured on a described machine
+        // (the core's rule); what drawing it later needs.
+        let deciding = self.chosen[a.deciding];
+        let undrawn = (machine.described && a.operating_state.is_some()).then(|| Undrawn {
+            chosen: self.chosen.clone(),
+            deciding,
+            channel: self.dec.channels[deciding].0.clone(),
+            tacho: facts.tacho.map(|t| (t.name, t.pulses_per_rev)),
+            shaft_hz: facts.shaft_hz,
+            input_shaft_hz: ctx.input_shaft_hz(),
+            load: facts.load,
+            gearbox_id: ctx.gearbox_row.id.clone(),
+            gearbox_hash: ctx.gearbox_row.hash.clone(),
+        });
         clock.lap("plot");
         Ok(Assessed {
             dec: self.dec,
@@ -458,6 +493,7 @@ impl AssessJob {
             clock,
             gearbox_row: self.ctx.gearbox_row,
             gearbox: self.ctx.gearbox,
+            undrawn,
         })
     }
 }

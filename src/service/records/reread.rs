@@ -19,6 +19,7 @@ use super::rows::{Ids, diagnosis_row, event_extras};
 use crate::diagnosis::WithheldReason;
 use crate::service::AppState;
 use crate::service::error::ApiResult;
+use crate::service::evidence::stored_evidence;
 use crate::service::tables;
 use crate::service::wire::Decoded;
 use crate::store::{NewRecord, PendingReread, Reread, new_id, now_ms};
@@ -99,7 +100,7 @@ pub async fn reread_gearbox(app: &AppState, gearbox_id: &str) -> usize {
 
 /// The record's channels from its stored f32 samples (one after another in the order of its
 /// channel names; a single channel is `"0"`).
-fn channels(rec: &NewRecord, bytes: &[u8]) -> Vec<(String, Vec<f64>)> {
+pub(crate) fn channels(rec: &NewRecord, bytes: &[u8]) -> Vec<(String, Vec<f64>)> {
     let names = rec.channels.clone().unwrap_or_else(|| vec!["0".into()]);
     let n = rec.sample_count.max(0) as usize;
     let all: Vec<f64> = bytes
@@ -155,6 +156,7 @@ pub async fn reread(app: &AppState, p: &PendingReread) -> ApiResult<Outcome> {
         spectrum,
         gearbox_row,
         gearbox,
+        undrawn,
         ..
     } = tokio::task::spawn_blocking(move || job.run())
         .await
@@ -180,10 +182,13 @@ pub async fn reread(app: &AppState, p: &PendingReread) -> ApiResult<Outcome> {
     let body = serde_json::to_string(&assessment).map_err(|e| {
         crate::service::ApiError::internal(format!("the assessment did not serialise: {e}"))
     })?;
+    // Read again from its stored samples, which are kept: the plot is drawn when asked for.
+    let evidence = stored_evidence(&assessment, undrawn.as_ref(), true);
     let mut d = diagnosis_row(
         &assessment,
         body,
         spectrum.as_ref(),
+        evidence,
         &ids,
         &p.machine_id,
         rec.measured_at,

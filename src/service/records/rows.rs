@@ -51,12 +51,13 @@ pub(super) fn answer(body: &str, ids: &Ids, machine_id: &str, level: Level) -> S
     }
 }
 
-fn f32_bytes(x: &[f64]) -> Vec<u8> {
-    let mut v = Vec::with_capacity(x.len() * 4);
-    for s in x {
-        v.extend_from_slice(&(*s as f32).to_le_bytes());
+/// `x` as little-endian f32, appended to `v`.
+fn put_f32(v: &mut Vec<u8>, x: &[f64]) {
+    let start = v.len();
+    v.resize(start + 4 * x.len(), 0);
+    for (d, s) in v[start..].chunks_exact_mut(4).zip(x) {
+        d.copy_from_slice(&(*s as f32).to_le_bytes());
     }
-    v
 }
 
 /// The record's row: what was received (raw samples kept while the retention allows).
@@ -90,7 +91,7 @@ pub(super) fn record_row(
         samples: keep_raw.then(|| {
             let mut v = Vec::with_capacity(4 * sample_count * channels.len());
             for (_, x) in channels {
-                v.extend_from_slice(&f32_bytes(x));
+                put_f32(&mut v, x);
             }
             v
         }),
@@ -100,11 +101,12 @@ pub(super) fn record_row(
 }
 
 /// The diagnosis's row: the assessment as answered (`body`), the wear its trend follows, the
-/// spectrum plot.
+/// spectrum plot, the `evidence` text ([`crate::service::evidence::stored_evidence`]).
 pub(crate) fn diagnosis_row(
     a: &Assessment,
     body: String,
     spectrum: Option<&PlotSpectrum>,
+    evidence: String,
     ids: &Ids,
     machine_id: &str,
     measured_at: i64,
@@ -131,7 +133,7 @@ pub(crate) fn diagnosis_row(
         motion_state: motion,
         body,
         spectrum: serde_json::to_string(&spectrum).unwrap_or_else(|_| "null".into()),
-        evidence: serde_json::to_string(&a.evidence_plot).unwrap_or_else(|_| "null".into()),
+        evidence,
         has_wear: wear.is_some(),
         novelty_score: decide.novelty.as_ref().map(|n| n.score),
         novelty_threshold: decide.novelty.as_ref().map(|n| n.threshold),
