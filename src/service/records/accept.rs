@@ -11,7 +11,7 @@ use super::idempotency::Idempotency;
 use super::rows::{Ids, answer, diagnosis_row, event_extras, measured_at, record_row};
 use crate::assessment::{
     Assessment, Baselines, Machine, MachineCalibration, OwnModel, RecordFacts, TableDiagnoser,
-    TachoChannel, Thresholds, assess, reads_as_described,
+    TachoChannel, Thresholds, assess, assess_undrawn, reads_as_described,
 };
 use crate::condition::Load;
 use crate::diagnosis::WithheldReason;
@@ -344,6 +344,9 @@ pub(super) struct AssessJob {
     tacho: Option<TachoChannel>,
     /// The machine's declared units and ISO class.
     units: MachineUnits,
+    /// Draw the evidence plot on the path: the record's samples are not kept to draw it from
+    /// later.
+    draws: bool,
     /// The machine's own model, when one is ready for its baseline.
     own: Option<Arc<OwnModel>>,
 }
@@ -422,6 +425,7 @@ impl RecordRequest {
             declared_healthy: self.declared_healthy,
             tacho: self.tacho,
             units,
+            draws: app.settings.raw_retention.is_zero(),
         })
     }
 }
@@ -459,10 +463,10 @@ impl AssessJob {
             thresholds: self.thresholds,
             units: std::mem::take(&mut self.units),
         };
-        // The core's `assess` also draws the evidence plot. With raw samples kept the plot is
-        // not stored here but drawn when first asked for (`service::evidence`): until the core
-        // offers the assessment without the plot, the drawing on the path is thrown away.
-        let a = assess(
+        // With raw samples kept the evidence plot is not drawn here but when first asked for
+        // (`service::evidence`), from the stored samples.
+        let assess_with = if self.draws { assess } else { assess_undrawn };
+        let a = assess_with(
             &mut self.dec.channels,
             &self.chosen,
             &facts,

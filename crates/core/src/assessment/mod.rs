@@ -376,6 +376,18 @@ pub fn assess(
     assess_drawing(channels, chosen, facts, machine, stage, true)
 }
 
+/// [`assess`] without the evidence plot (`evidence_plot` is `None`): for a caller that keeps
+/// the record's samples and draws the plot from them when someone asks for it.
+pub fn assess_undrawn(
+    channels: &mut [(String, Vec<f64>)],
+    chosen: &[usize],
+    facts: &RecordFacts,
+    machine: &Machine,
+    stage: &mut dyn FnMut(&'static str),
+) -> crate::Result<Assessment> {
+    assess_drawing(channels, chosen, facts, machine, stage, false)
+}
+
 /// [`assess`], with the evidence plot drawn only when `draw` (a baseline's features need
 /// none).
 fn assess_drawing(
