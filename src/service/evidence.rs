@@ -90,7 +90,7 @@ async fn draw_stored(app: &AppState, d: &DiagnosisRow) -> ApiResult<Option<Evide
     let Some((rec, bytes)) = rec.and_then(|mut r| r.samples.take().map(|b| (r, b))) else {
         return Ok(None);
     };
-    let channels = super::records::reread::channels(&rec, &bytes);
+    let channels = super::wire::stored_channels(&rec, &bytes);
     let fs = rec.sample_rate_hz;
     tokio::task::spawn_blocking(move || draw(&u, &channels, fs, &gearbox))
         .await

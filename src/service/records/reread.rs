@@ -22,7 +22,7 @@ use crate::service::error::ApiResult;
 use crate::service::evidence::stored_evidence;
 use crate::service::tables;
 use crate::service::wire::Decoded;
-use crate::store::{NewRecord, PendingReread, Reread, new_id, now_ms};
+use crate::store::{PendingReread, Reread, new_id, now_ms};
 
 /// Most pending records one pass reads again (the next pass, at the worker's next idle poll,
 /// takes the rest).
@@ -98,26 +98,6 @@ pub async fn reread_gearbox(app: &AppState, gearbox_id: &str) -> usize {
     stored
 }
 
-/// The record's channels from its stored f32 samples (one after another in the order of its
-/// channel names; a single channel is `"0"`).
-pub(crate) fn channels(rec: &NewRecord, bytes: &[u8]) -> Vec<(String, Vec<f64>)> {
-    let names = rec.channels.clone().unwrap_or_else(|| vec!["0".into()]);
-    let n = rec.sample_count.max(0) as usize;
-    let all: Vec<f64> = bytes
-        .chunks_exact(4)
-        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64)
-        .collect();
-    names
-        .into_iter()
-        .enumerate()
-        .map(|(i, name)| {
-            let lo = (i * n).min(all.len());
-            let hi = ((i + 1) * n).min(all.len());
-            (name, all[lo..hi].to_vec())
-        })
-        .collect()
-}
-
 /// Read one pending record again.
 pub async fn reread(app: &AppState, p: &PendingReread) -> ApiResult<Outcome> {
     let Some(machine) = app.store.get_machine(&p.machine_id).await? else {
@@ -136,7 +116,7 @@ pub async fn reread(app: &AppState, p: &PendingReread) -> ApiResult<Outcome> {
         .and_then(|t| serde_json::from_str(t).ok())
         .unwrap_or_default();
     let dec = Decoded {
-        channels: channels(&rec, &bytes),
+        channels: crate::service::wire::stored_channels(&rec, &bytes),
         sample_rate_hz: rec.sample_rate_hz,
         shaft_hz: rec.shaft_hz,
         recorded_at: rec.recorded_at.clone(),

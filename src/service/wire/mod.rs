@@ -448,3 +448,23 @@ pub fn decode(
         record_id,
     })
 }
+
+/// The record's channels from its stored f32 samples (one after another in the order of its
+/// channel names; a single channel is `"0"`).
+pub fn stored_channels(rec: &crate::store::NewRecord, bytes: &[u8]) -> Vec<(String, Vec<f64>)> {
+    let names = rec.channels.clone().unwrap_or_else(|| vec!["0".into()]);
+    let n = rec.sample_count.max(0) as usize;
+    let all: Vec<f64> = bytes
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64)
+        .collect();
+    names
+        .into_iter()
+        .enumerate()
+        .map(|(i, name)| {
+            let lo = (i * n).min(all.len());
+            let hi = ((i + 1) * n).min(all.len());
+            (name, all[lo..hi].to_vec())
+        })
+        .collect()
+}
