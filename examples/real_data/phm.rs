@@ -405,15 +405,7 @@ fn fit_baseline(
         .require_all()
         .expect("baseline")
         .with_paths(&by_channel, diagnoser);
-    let ratios = by_channel
-        .iter()
-        .map(|(k, v)| {
-            (
-                k.clone(),
-                v.iter().filter_map(|f| f.ratios.clone()).collect(),
-            )
-        })
-        .collect();
+    let ratios = gearwear::novelty::line_ratios(&by_channel);
     (b, ratios, t0.elapsed().as_secs_f64())
 }
 

@@ -153,15 +153,7 @@ pub fn fit(
             crate::novelty::MIN_BASELINE_RECORDS
         )
     })?;
-    let ratios = by_channel
-        .iter()
-        .map(|(k, v)| {
-            (
-                k.clone(),
-                v.iter().filter_map(|f| f.ratios.clone()).collect(),
-            )
-        })
-        .collect();
+    let ratios = crate::novelty::line_ratios(&by_channel);
     Ok((fitted.with_paths(&by_channel, machine.diagnoser), ratios))
 }
 

@@ -27,18 +27,14 @@ pub fn key_of(m: &MachineRow, hash: &str) -> PhysicsKey {
     }
 }
 
-/// The line ratios per channel of baseline records' features (those that carry them).
+/// The line ratios per channel of baseline records' features ([`crate::novelty::line_ratios`]), channels
+/// without any left out.
 pub fn healthy_ratios(
     per: &BTreeMap<String, Vec<RecordFeatures>>,
 ) -> BTreeMap<String, Vec<LineRatios>> {
-    per.iter()
-        .map(|(c, fs)| {
-            (
-                c.clone(),
-                fs.iter().filter_map(|f| f.ratios.clone()).collect(),
-            )
-        })
-        .filter(|(_, r): &(String, Vec<LineRatios>)| !r.is_empty())
+    crate::novelty::line_ratios(per)
+        .into_iter()
+        .filter(|(_, r)| !r.is_empty())
         .collect()
 }
 

@@ -120,6 +120,22 @@ impl RecordFeatures {
     }
 }
 
+/// The line ratios per channel of records' features (those that carry them; a channel whose
+/// records carry none has an empty list): what the machine's own model is fitted to.
+pub fn line_ratios(
+    per_channel: &BTreeMap<String, Vec<RecordFeatures>>,
+) -> BTreeMap<String, Vec<crate::diagnosis::machine_path::LineRatios>> {
+    per_channel
+        .iter()
+        .map(|(c, fs)| {
+            (
+                c.clone(),
+                fs.iter().filter_map(|f| f.ratios.clone()).collect(),
+            )
+        })
+        .collect()
+}
+
 /// Track the input shaft from the stage-1 mesh line near `mesh_hz_hint` (searched within
 /// `± search`, relative) and compute the TSA and its metrics for every shaft of `gb`
 /// ([`crate::signal::tsa::order_analysis`] on [`Gearbox::shaft_train`]).
